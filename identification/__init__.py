@@ -1,0 +1,1 @@
+"""identification: SINDy-with-control on pysindy for quadrotor data."""

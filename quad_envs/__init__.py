@@ -1,0 +1,30 @@
+"""quad_envs: Gymnasium quadrotor environments on paper-exact RK4 physics.
+
+Importing the package registers ``PlanarQuad-v0`` and ``Quad6DOF-v0`` (also reachable as
+``gym.make("quad_envs:PlanarQuad-v0")`` without the import).
+"""
+
+from __future__ import annotations
+
+from gymnasium.envs.registration import register, registry
+
+__version__ = "0.1.0"
+
+MAX_EPISODE_STEPS = 1000
+"""Default time limit: 10 s at the default 0.01 s control step."""
+
+_ENVS = {
+    "PlanarQuad-v0": ("planar:PlanarQuadEnv", "planar:PlanarQuadVectorEnv"),
+    "Quad6DOF-v0": ("quad6dof:Quad6DOFEnv", "quad6dof:Quad6DOFVectorEnv"),
+}
+
+for _env_id, (_single, _vector) in _ENVS.items():
+    if _env_id not in registry:
+        register(
+            id=_env_id,
+            entry_point=f"quad_envs.envs.{_single}",
+            vector_entry_point=f"quad_envs.envs.{_vector}",
+            max_episode_steps=MAX_EPISODE_STEPS,
+        )
+
+ENV_IDS: tuple[str, ...] = tuple(_ENVS)

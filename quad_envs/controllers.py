@@ -79,8 +79,10 @@ class Quad6DOFPD:
 
     Position loop: a_c = a_d + Kv (v_d - v) + Kp (p_d - p) in the inertial frame.
     u1 = m (g + a_c,z) / (cos phi cos theta); attitude commands from the small-angle map
-    phi_c = (a_c,x sin psi_d - a_c,y cos psi_d) / g, theta_c = (a_c,x cos psi_d + a_c,y sin psi_d) / g.
-    Attitude loop: M = J (Kp_att (angle_c - angle) + Kv_att (rate_c - omega)), rate_c = [0, 0, psi_dot_d].
+    phi_c = (a_c,x sin psi_d - a_c,y cos psi_d) / g,
+    theta_c = (a_c,x cos psi_d + a_c,y sin psi_d) / g.
+    Attitude loop: M = J (Kp_att (angle_c - angle) + Kv_att (rate_c - omega)),
+    rate_c = [0, 0, psi_dot_d].
 
     Args:
         params: Vehicle parameters the controller believes in.

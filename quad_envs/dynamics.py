@@ -57,6 +57,7 @@ def planar_rhs(x: FloatArray, u: FloatArray, params: PlanarQuadParams) -> FloatA
     Args:
         x: States, shape (..., 6).
         u: Inputs [u1, u2], shape (..., 2); batch axes broadcast against x's.
+        params: Vehicle parameters.
 
     Returns:
         dx/dt, shape (..., 6).
@@ -150,7 +151,8 @@ def euler_rates_matrix(phi: FloatArray, theta: FloatArray) -> FloatArray:
 def quad6dof_rhs(x: FloatArray, u: FloatArray, params: Quad6DOFParams) -> FloatArray:
     """Time derivative of the 6-DOF state (no saturation), paper section 2.
 
-    r_dot = R v_B;  angle rates = T^-1 omega;  v_B_dot = R^T [0, 0, -g] + [0, 0, u1/m] - omega x v_B;
+    r_dot = R v_B;  angle rates = T^-1 omega;
+    v_B_dot = R^T [0, 0, -g] + [0, 0, u1/m] - omega x v_B;
     omega_dot = J^-1 (M - omega x J omega) with M = [u2, u3, u4].
 
     Args:

@@ -238,7 +238,9 @@ class RandomWaypoints(Trajectory):
     def __init__(self, waypoints: FloatArray, segment_time: float = 2.0) -> None:
         self.waypoints = np.asarray(waypoints, dtype=np.float64)
         if self.waypoints.ndim < 2 or self.waypoints.shape[-1] not in (2, 3):
-            raise ValueError(f"waypoints must have shape (..., K, 2 or 3), got {self.waypoints.shape}")
+            raise ValueError(
+                f"waypoints must have shape (..., K, 2 or 3), got {self.waypoints.shape}"
+            )
         self.ndim = self.waypoints.shape[-1]
         self.segment_time = float(segment_time)
 

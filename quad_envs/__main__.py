@@ -1,0 +1,5 @@
+"""``python -m quad_envs``: the quad-sindy command line."""
+
+from quad_envs.cli import main
+
+main()

@@ -1,0 +1,84 @@
+"""Speed benchmarks (scripts print numbers; tests never time anything)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import gymnasium as gym
+import numpy as np
+
+
+def _rate(step: Callable[[], object], min_seconds: float) -> float:
+    """Calls ``step`` repeatedly for at least min_seconds; returns calls per second."""
+    for _ in range(50):  # warm-up
+        step()
+    calls, start = 0, time.perf_counter()
+    while True:
+        for _ in range(200):
+            step()
+        calls += 200
+        elapsed = time.perf_counter() - start
+        if elapsed >= min_seconds:
+            return calls / elapsed
+
+
+def single_env_rate(env_id: str, min_seconds: float = 2.0, **kwargs: object) -> float:
+    """Steps per second of ``gym.make(env_id)`` under a fixed in-bounds action."""
+    env = gym.make(env_id, **kwargs)
+    env.reset(seed=0)
+    action = _hover_action(env)
+
+    def step() -> None:
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+
+    rate = _rate(step, min_seconds)
+    env.close()
+    return rate
+
+
+def vector_env_rate(
+    env_id: str, num_envs: int = 1024, min_seconds: float = 2.0, **kwargs: object
+) -> float:
+    """Env-steps per second of ``gym.make_vec(env_id, num_envs)`` (native vector env)."""
+    env = gym.make_vec(env_id, num_envs=num_envs, **kwargs)
+    env.reset(seed=0)
+    actions = np.tile(_hover_action(env, single=True), (num_envs, 1))
+    rate = _rate(lambda: env.step(actions), min_seconds) * num_envs
+    env.close()
+    return rate
+
+
+def _hover_action(env: object, single: bool = False) -> np.ndarray:
+    space = env.single_action_space if single else env.action_space  # type: ignore[attr-defined]
+    params = getattr(env.unwrapped, "params", None)  # type: ignore[attr-defined]
+    if params is None or getattr(env.unwrapped, "normalize_actions", True):  # type: ignore[attr-defined]
+        return np.clip(np.zeros(space.shape), space.low, space.high)
+    action = np.zeros(space.shape)
+    action[0] = params.hover_thrust
+    return action
+
+
+def bench_envs(
+    env_ids: tuple[str, ...], num_envs: int = 1024, min_seconds: float = 2.0
+) -> list[dict]:
+    """Measures Pendulum-v1 and each env id single and vectorised, in one run."""
+    pendulum = single_env_rate("Pendulum-v1", min_seconds)
+    rows = [{"env": "Pendulum-v1", "mode": "single", "steps_per_s": pendulum, "ratio": 1.0}]
+    for env_id in env_ids:
+        single = single_env_rate(env_id, min_seconds)
+        vec = vector_env_rate(env_id, num_envs, min_seconds)
+        rows.append(
+            {"env": env_id, "mode": "single", "steps_per_s": single, "ratio": single / pendulum}
+        )
+        rows.append(
+            {
+                "env": env_id,
+                "mode": f"vector x{num_envs}",
+                "steps_per_s": vec,
+                "ratio": vec / pendulum,
+            }
+        )
+    return rows

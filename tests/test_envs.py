@@ -1,0 +1,221 @@
+import pickle
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import quad_envs
+from quad_envs.controllers import PlanarPD, Quad6DOFPD
+
+IDS = quad_envs.ENV_IDS
+NORMALIZE_ADVICE = "symmetric and normalized space"
+
+
+def _check_all_warnings_errors(env, allow=()):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gym_check_env(env.unwrapped, skip_render_check=False)
+    bad = [w for w in caught if not any(a in str(w.message) for a in allow)]
+    assert not bad, [str(w.message) for w in bad]
+
+
+@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("kwargs", [
+    {"normalize_actions": True},
+    {"normalize_actions": True, "trajectory": "random", "init_state_scale": 1.0,
+     "obs_noise_std": 0.01, "param_randomization": 0.1},
+])  # fmt: skip
+def test_gymnasium_check_env_without_warnings(env_id, kwargs):
+    _check_all_warnings_errors(gym.make(env_id, render_mode="rgb_array", **kwargs))
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_physical_units_default_only_warns_about_normalisation(env_id):
+    """Physical thrust bounds exceed [-1, 1] by design: that advice is the only warning."""
+    _check_all_warnings_errors(gym.make(env_id), allow=(NORMALIZE_ADVICE,))
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_sb3_check_env(env_id):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sb3_check_env(gym.make(env_id, normalize_actions=True), warn=True)
+    sb3_check_env(gym.make(env_id), warn=False)
+
+
+def _rollout(env, seed, n=60):
+    obs, _ = env.reset(seed=seed)
+    env.action_space.seed(seed)
+    out = [obs]
+    for _ in range(n):
+        obs, rew, term, trunc, _ = env.step(env.action_space.sample())
+        out.append(np.append(obs, rew))
+        if term or trunc:
+            break
+    return out
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_seeded_determinism(env_id):
+    kwargs = dict(
+        normalize_actions=True, trajectory="random", init_state_scale=0.5, obs_noise_std=0.01
+    )
+    a = _rollout(gym.make(env_id, **kwargs), 3)
+    b = _rollout(gym.make(env_id, **kwargs), 3)
+    c = _rollout(gym.make(env_id, **kwargs), 4)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    assert not np.array_equal(a[0], c[0])
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_pickle_round_trip(env_id):
+    env = gym.make(env_id, trajectory="figure8")
+    env.reset(seed=0)
+    action = np.zeros(env.action_space.shape)
+    action[0] = env.unwrapped.params.hover_thrust
+    env.step(action)
+    clone = pickle.loads(pickle.dumps(env))
+    for _ in range(5):
+        o1, r1, *_ = env.step(action)
+        o2, r2, *_ = clone.step(action)
+        np.testing.assert_array_equal(o1, o2)
+        assert r1 == r2
+
+
+@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("trajectory", ["diamond", "random"])
+def test_vector_env_equals_single_envs(env_id, trajectory):
+    n, seed = 4, 11
+    kwargs = dict(
+        trajectory=trajectory, init_state_scale=0.3, obs_noise_std=0.001, param_randomization=0.05
+    )
+    venv = gym.make_vec(env_id, num_envs=n, **kwargs)
+    assert isinstance(venv.unwrapped, quad_envs.envs.QuadrotorVectorEnv)
+    singles = [gym.make(env_id, **kwargs) for _ in range(n)]
+    vobs, _ = venv.reset(seed=seed)
+    sobs = [env.reset(seed=seed + i)[0] for i, env in enumerate(singles)]
+    np.testing.assert_allclose(vobs, np.stack(sobs), rtol=0, atol=1e-12)
+    rng = np.random.default_rng(0)
+    lo, hi = venv.single_action_space.low, venv.single_action_space.high
+    done = np.zeros(n, dtype=bool)
+    resets = 0
+    for _ in range(80):
+        actions = rng.uniform(lo, hi, size=(n, lo.size)) * 0.2 + 0.8 * (lo + hi) / 2
+        vobs, vrew, vterm, vtrunc, _ = venv.step(actions)
+        for i, env in enumerate(singles):
+            if done[i]:  # NEXT_STEP autoreset: the member resets from its own generator
+                obs, rew, term, trunc = env.reset()[0], 0.0, False, False
+                resets += 1
+            else:
+                obs, rew, term, trunc, _ = env.step(actions[i])
+            np.testing.assert_allclose(vobs[i], obs, rtol=0, atol=1e-9)
+            assert vrew[i] == pytest.approx(rew, abs=1e-12)
+            assert vterm[i] == term and vtrunc[i] == trunc
+        done = vterm | vtrunc
+    assert resets > 0  # the aggressive random moments crash some members
+
+
+def test_vector_env_truncates_and_autoresets_next_step():
+    venv = gym.make_vec("PlanarQuad-v0", num_envs=2, max_episode_steps=5)
+    venv.reset(seed=0)
+    action = np.tile([quad_envs.params.PAPER_PLANAR.hover_thrust, 0.0], (2, 1))
+    for _ in range(4):
+        _, _, term, trunc, _ = venv.step(action)
+        assert not trunc.any() and not term.any()
+    _, _, term, trunc, _ = venv.step(action)
+    assert trunc.all()
+    _, rew, term, trunc, info = venv.step(action)  # the reset step
+    assert not trunc.any() and np.all(rew == 0) and np.all(info["time"] == 0)
+
+
+@pytest.mark.parametrize(
+    "env_id,ctrl", [("PlanarQuad-v0", PlanarPD()), ("Quad6DOF-v0", Quad6DOFPD())]
+)
+def test_pd_flies_the_env_and_time_limit_truncates(env_id, ctrl):
+    env = gym.make(env_id, trajectory="diamond")
+    obs, info = env.reset(seed=0)
+    total, steps = 0.0, 0
+    while True:
+        obs, rew, term, trunc, info = env.step(ctrl(info["state"], info["reference"]))
+        total, steps = total + rew, steps + 1
+        if term or trunc:
+            break
+    assert trunc and not term and steps == quad_envs.MAX_EPISODE_STEPS
+    assert total > 0.95 * steps  # tracking reward close to 1 per step
+    assert info["time"] == pytest.approx(10.0)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_falling_terminates_with_finite_observation(env_id):
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    zero = env.action_space.low.copy()  # no thrust at all
+    zero[1:] = 0
+    for step in range(1000):  # noqa: B007 (used after the loop)
+        obs, rew, term, trunc, info = env.step(zero)
+        if term:
+            break
+    assert term and not trunc and info["out_of_bounds"]
+    assert np.all(np.isfinite(obs)) and obs in env.observation_space and rew == 0
+    # free fall from 1 m to the ground at -1 m: sqrt(2 * 2 / g) s
+    assert step * 0.01 == pytest.approx(np.sqrt(4 / 9.81), abs=0.02)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_bad_actions_and_options_raise_clear_errors(env_id):
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    m = env.action_space.shape[0]
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.zeros(m + 1))
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.full(m, np.nan))
+    with pytest.raises(ValueError, match="finite"):
+        env.step(np.full(m, np.inf))
+    with pytest.raises(ValueError, match="valid choices"):
+        env.reset(options={"trajectory": "circle"})
+    with pytest.raises(ValueError, match="valid options"):
+        env.reset(options={"trajectroy": "hover"})
+    with pytest.raises(ValueError, match="valid choices"):
+        gym.make(env_id, trajectory="loop")
+    venv = gym.make_vec(env_id, num_envs=3)
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match="shape"):
+        venv.step(np.zeros((2, m)))
+
+
+def test_reset_options_choose_trajectory_and_state():
+    env = gym.make("PlanarQuad-v0")
+    obs, info = env.reset(seed=0, options={"trajectory": "C"})
+    np.testing.assert_allclose(info["reference"][:2], [0, 1.8])
+    x0 = np.array([0.1, 0.5, 0.0, 0, 0, 0])
+    obs, info = env.reset(options={"state": x0})
+    np.testing.assert_array_equal(obs[:6], x0)
+    np.testing.assert_allclose(obs[6:8], info["reference"][:2] - x0[:2])
+
+
+def test_domain_randomisation_changes_the_vehicle():
+    env = gym.make("PlanarQuad-v0", param_randomization=0.2)
+    env.reset(seed=0)
+    action = np.array([quad_envs.params.PAPER_PLANAR.hover_thrust, 0.0])
+    *_, info = env.step(action)
+    # with the nominal mass the hover thrust holds z; a randomised mass drifts
+    assert abs(info["state"][4]) > 1e-4
+
+
+def test_make_without_import_and_render():
+    code = (
+        "import gymnasium as gym\n"
+        "env = gym.make('quad_envs:PlanarQuad-v0', render_mode='rgb_array')\n"
+        "env.reset(seed=0)\n"
+        "env.step(env.action_space.sample())\n"
+        "img = env.render()\n"
+        "assert img.ndim == 3 and img.shape[2] == 3 and img.dtype.name == 'uint8'\n"
+        "assert img.std() > 0\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, env={"MPLBACKEND": "Agg", "PATH": ""})
