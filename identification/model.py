@@ -1,0 +1,247 @@
+"""The identified model: coefficients over named features, compiled, simulated, saved."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from identification.features import compile_features, compile_rhs, parse_term, term_latex, term_name
+from quad_envs.integrators import rk4_step
+from quad_envs.io import write_json
+from quad_envs.simulate import ClosedLoopRun, get_system, simulate_closed_loop
+from quad_envs.trajectories import Trajectory as Reference
+
+SCHEMA = "quad-sindy/model"
+SCHEMA_VERSION = 1
+
+
+@dataclass
+class IdentifiedModel:
+    """dx/dt = Xi Theta(x, u): a sparse model over named features.
+
+    Attributes:
+        feature_names: Library terms (grammar of :mod:`identification.features`).
+        coefficients: Xi, shape (n_states, n_features).
+        state_names: Names of the states (rows of Xi).
+        input_names: Names of the inputs.
+        system: ``planar``/``quad6dof`` when the model stands for a known vehicle (enables
+            closed-loop simulation with its saturation and controller), else None.
+        meta: Provenance: method, lambda, optimizer, dt, data size, ...
+    """
+
+    feature_names: list[str]
+    coefficients: np.ndarray
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    system: str | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.feature_names = list(self.feature_names)
+        self.state_names, self.input_names = tuple(self.state_names), tuple(self.input_names)
+        self.coefficients = np.asarray(self.coefficients, dtype=np.float64)
+        expected = (len(self.state_names), len(self.feature_names))
+        if self.coefficients.shape != expected:
+            raise ValueError(
+                f"coefficients must have shape {expected} (states x features), "
+                f"got {self.coefficients.shape}"
+            )
+        if not np.isfinite(self.coefficients).all():
+            raise ValueError("coefficients contain NaN or infinite values")
+        variables = [*self.state_names, *self.input_names]
+        for name in self.feature_names:
+            parse_term(name, variables)  # raises on unknown variables or bad syntax
+        if self.system is not None:
+            sys_ = get_system(self.system)
+            if (sys_.state_names, sys_.input_names) != (self.state_names, self.input_names):
+                raise ValueError(
+                    f"model variables {self.state_names} / {self.input_names} do not match the "
+                    f"{self.system} system's {sys_.state_names} / {sys_.input_names}"
+                )
+        self._rhs: Callable | None = None
+        self._theta: Callable | None = None
+
+    # -- evaluation -------------------------------------------------------------------
+    def rhs(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """dx/dt for states (..., n) and inputs (..., m): compiled straight-line numpy."""
+        if self._rhs is None:
+            self._rhs = compile_rhs(
+                self.feature_names, self.coefficients, self.state_names, self.input_names
+            )
+        return self._rhs(x, u)
+
+    def theta(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The library evaluated at (x, u), shape (..., n_features)."""
+        if self._theta is None:
+            self._theta = compile_features(self.feature_names, self.state_names, self.input_names)
+        return self._theta(x, u)
+
+    def torch_rhs(self, device: Any = None, dtype: Any = None) -> Callable[[Any, Any], Any]:
+        """A batched torch version of :meth:`rhs` (differentiable; any device and dtype).
+
+        Args:
+            device: Torch device of the inputs (coefficients are baked in as Python floats,
+                so the function runs wherever its inputs live).
+            dtype: Unused placeholder for symmetry; the result follows the inputs' dtype.
+
+        Returns:
+            rhs(x, u) on tensors of shape (..., n) and (..., m).
+        """
+        import torch
+
+        return compile_rhs(
+            self.feature_names, self.coefficients, self.state_names, self.input_names, xp=torch
+        )
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_rhs"] = state["_theta"] = None  # compiled code is rebuilt on demand
+        return state
+
+    @property
+    def n_terms(self) -> int:
+        """Number of non-zero coefficients."""
+        return int(np.count_nonzero(self.coefficients))
+
+    # -- text -------------------------------------------------------------------------
+    def equations(self, precision: int = 4, latex: bool = False) -> list[str]:
+        """One equation per state, in plain text or LaTeX."""
+        lines = []
+        for i, state in enumerate(self.state_names):
+            parts = []
+            for j, name in enumerate(self.feature_names):
+                c = self.coefficients[i, j]
+                if c == 0:
+                    continue
+                term = parse_term(name)
+                text = term_latex(term) if latex else term_name(term)
+                coef = f"{c:.{precision}g}"
+                parts.append(coef if text == "1" else f"{coef} {text}")
+            rhs = " + ".join(parts).replace("+ -", "- ") if parts else "0"
+            if latex:
+                lhs = "\\dot{" + term_latex(parse_term(state)) + "}"
+                lines.append(f"{lhs} = {rhs}")
+            else:
+                lines.append(f"{state}' = {rhs}")
+        return lines
+
+    # -- simulation -------------------------------------------------------------------
+    def simulate(
+        self, x0: np.ndarray, inputs: np.ndarray, dt: float, substeps: int = 1
+    ) -> np.ndarray:
+        """Open loop: RK4 with each input held for dt. Returns states, shape (len(inputs)+1, n)."""
+        x0 = np.asarray(x0, dtype=np.float64)
+        inputs = np.atleast_2d(np.asarray(inputs, dtype=np.float64))
+        if x0.shape != (len(self.state_names),):
+            raise ValueError(f"x0 must have shape ({len(self.state_names)},), got {x0.shape}")
+        if inputs.shape[1] != len(self.input_names):
+            raise ValueError(
+                f"inputs must have {len(self.input_names)} columns, got {inputs.shape}"
+            )
+        out = np.empty((len(inputs) + 1, x0.size))
+        out[0] = x = x0
+        for k, u in enumerate(inputs):
+            x = rk4_step(self.rhs, x, u, dt, substeps)
+            out[k + 1] = x
+        return out
+
+    def simulate_closed_loop(
+        self,
+        reference: Reference,
+        controller: Callable | None = None,
+        dt: float = 0.01,
+        duration: float = 10.0,
+        x0: np.ndarray | None = None,
+    ) -> ClosedLoopRun:
+        """Flies the model under a controller (its system's PD by default), with saturation."""
+        if self.system is None:
+            raise ValueError("closed-loop simulation needs a model of a known system (system=...)")
+        sys_ = replace(get_system(self.system), rhs=self.rhs)
+        return simulate_closed_loop(sys_, reference, controller, dt, duration, x0)
+
+    # -- persistence ------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (schema-versioned)."""
+        return {
+            "schema": SCHEMA,
+            "schema_version": SCHEMA_VERSION,
+            "system": self.system,
+            "state_names": list(self.state_names),
+            "input_names": list(self.input_names),
+            "feature_names": self.feature_names,
+            "coefficients": self.coefficients.tolist(),
+            "equations": self.equations(precision=8),
+            "meta": self.meta,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Any, source: str = "model") -> IdentifiedModel:
+        """Builds a model from :meth:`to_dict` output, with errors naming what is wrong."""
+        if not isinstance(data, dict):
+            raise ValueError(
+                f"{source}: a model file holds a JSON object, got {type(data).__name__}"
+            )
+        if data.get("schema") != SCHEMA:
+            raise ValueError(f"{source}: not a quad-sindy model (schema {data.get('schema')!r})")
+        version = data.get("schema_version")
+        if version != SCHEMA_VERSION:
+            raise ValueError(
+                f"{source}: schema_version {version!r} is not supported (expected {SCHEMA_VERSION})"
+            )
+        missing = [
+            k
+            for k in ("state_names", "input_names", "feature_names", "coefficients")
+            if k not in data
+        ]
+        if missing:
+            raise ValueError(f"{source}: missing field(s) {missing}")
+        try:
+            coefficients = np.array(data["coefficients"], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{source}: coefficients must be a numeric matrix") from None
+        try:
+            return cls(
+                data["feature_names"], coefficients, tuple(data["state_names"]),
+                tuple(data["input_names"]), data.get("system"), dict(data.get("meta") or {}),
+            )  # fmt: skip
+        except ValueError as exc:
+            raise ValueError(f"{source}: {exc}") from None
+
+    def save(self, path: str | Path) -> Path:
+        """Writes the model as JSON, atomically."""
+        return write_json(path, self.to_dict())
+
+
+def load_model(path: str | Path) -> IdentifiedModel:
+    """Reads a model written by :meth:`IdentifiedModel.save`.
+
+    Raises:
+        FileNotFoundError: No such file.
+        ValueError: The file is not valid JSON or not a valid model (the message says why).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no such model file: {path}")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: malformed JSON ({exc})") from None
+    return IdentifiedModel.from_dict(data, source=str(path))
+
+
+def model_from_truth(system: str, feature_names: Sequence[str] | None = None) -> IdentifiedModel:
+    """The ground truth written as a model in a library (default: the system's library)."""
+    from identification.libraries import default_library
+    from identification.truth import truth_for, truth_matrix
+
+    sys_ = get_system(system)
+    names = list(feature_names) if feature_names is not None else default_library(system)
+    xi = truth_matrix(truth_for(system), sys_.state_names, names)
+    return IdentifiedModel(
+        names, xi, sys_.state_names, sys_.input_names, system, {"method": "truth"}
+    )
