@@ -185,7 +185,7 @@ def sparse_regression(theta: np.ndarray, y: np.ndarray, config: FitConfig) -> np
         coef_s = np.linalg.lstsq(ts, ys, rcond=None)[0].T
     else:
         if config.optimizer == "ensemble":
-            np.random.seed(config.seed)  # pysindy's bagging draws from the global generator
+            np.random.seed(config.seed)  # noqa: NPY002 (pysindy's bagging uses the global RNG)
         opt = _make_optimizer(config)
         opt.fit(ts, ys)
         coef_s = np.atleast_2d(opt.coef_)

@@ -18,7 +18,6 @@ from quad_envs.dynamics import (
     PLANAR_INPUT_NAMES,
     PLANAR_STATE_NAMES,
     QUAD6DOF_INPUT_NAMES,
-    QUAD6DOF_STATE_NAMES,
 )
 
 

@@ -63,21 +63,107 @@ def bench_envs_cmd(
         )
 
 
+class StudyName(str, Enum):
+    """Studies of ``quad-sindy study``."""
+
+    lambda_ = "lambda"
+    dt = "dt"
+    samples = "samples"
+    noise = "noise"
+
+
+def _shared_reference() -> Path | None:
+    """The authors' case C file when ../shared sits beside the working directory or repo."""
+    for base in (Path.cwd(), Path(__file__).resolve().parents[1]):
+        candidate = base.parent / "shared" / "reference" / "paper_diamond_case_c.csv"
+        if candidate.exists():
+            return candidate
+    return None
+
+
+@app.command()
+def identify(
+    data: Annotated[list[Path], typer.Argument(help="CSV or NPZ trajectory files")],
+    out: Annotated[Path, typer.Option(help="model JSON to write")],
+    system: Annotated[
+        SystemName, typer.Option(help="vehicle the data come from")
+    ] = SystemName.planar,
+    columns: Annotated[str | None, typer.Option(help="names of a headerless CSV's columns")] = None,
+    lam: Annotated[str, typer.Option("--lambda", help="'auto' (scan) or a threshold")] = "auto",
+    method: Annotated[str, typer.Option(help="rk4 | forward | central | smoothed | paper")] = "rk4",
+    optimizer: Annotated[str, typer.Option(help="sr3 | stlsq | ensemble")] = "sr3",
+    window: Annotated[int, typer.Option(help="integral window (noisy data: 10-20)")] = 1,
+) -> None:
+    """Identifies a SINDy-with-control model from data and prints its equations."""
+    from identification.data import load_data
+    from identification.evaluate import compare_closed_loop, normalized_score, validation_references
+    from identification.fit import FitConfig, fit, scan_lambda
+    from identification.libraries import default_library
+    from identification.paper import PAPER_LAMBDA, fit_paper
+
+    try:
+        cols = [c.strip() for c in columns.split(",")] if columns else None
+        trajs = load_data(data, cols, system.value)
+        if method == "paper":
+            if system is not SystemName.planar:
+                _fail("the paper's method is defined for the planar system only")
+            model = fit_paper(trajs, PAPER_LAMBDA if lam == "auto" else float(lam))
+        else:
+            config = FitConfig(derivative=method, optimizer=optimizer, window=window)
+            lib = default_library(system.value)
+            if lam == "auto":
+                refs = validation_references(system.value)
+
+                def score(m: object) -> float:
+                    return normalized_score([compare_closed_loop(m, r) for r in refs])
+
+                scan = scan_lambda(trajs, lib, score, config=config, system=system.value)
+                model = scan.model
+                typer.echo(f"lambda scan: chose {scan.lam:g} ({model.n_terms} terms)")
+            else:
+                config.lam = float(lam)
+                model = fit(trajs, lib, FitConfig(**config.__dict__), system.value)
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(str(exc))
+    model.save(out)
+    typer.echo("\n".join(model.equations()))
+    typer.echo(f"wrote {out}")
+
+
+@app.command()
+def reproduce(
+    out: Annotated[Path, typer.Option(help="output folder")] = Path("out/reproduce"),
+    authors_csv: Annotated[Path | None, typer.Option(help="the authors' case C file")] = None,
+) -> None:
+    """The paper end to end: simulate, identify (ours and the paper's method), test, report."""
+    from identification.reproduce import run
+
+    run(out, authors_csv=authors_csv or _shared_reference(), echo=typer.echo)
+
+
+@app.command()
+def study(
+    name: Annotated[StudyName, typer.Argument(help="which study")],
+    out: Annotated[Path, typer.Option(help="output folder")] = Path("out/study"),
+) -> None:
+    """Coefficient error and support against lambda, dt, data size or noise (CSV + PNG)."""
+    from identification.study import run_study
+
+    path = run_study(name.value, out)
+    typer.echo(f"wrote {path} and {path.with_suffix('.png')}")
+
+
 @app.command()
 def demo(
     out: Annotated[Path, typer.Option(help="output folder")] = Path("out/demo"),
 ) -> None:
-    """Simulates the paper's cases A, B, C: CSVs and response plots."""
-    from quad_envs.io import write_csv
+    """The main job on embedded defaults: ``reproduce`` plus response plots of A, B, C."""
     from quad_envs.plotting import plot_response
     from quad_envs.simulate import simulate_case
 
     for case in "ABC":
-        run = simulate_case(case)
-        header, rows = run.table()
-        write_csv(out / f"case_{case}.csv", header, rows)
-        plot_response(run, out / f"case_{case}.png", title=f"Paper case {case}")
-    typer.echo(f"wrote CSVs and response plots of cases A, B, C to {out}/")
+        plot_response(simulate_case(case), out / f"case_{case}.png", title=f"Paper case {case}")
+    reproduce(out=out, authors_csv=None)
 
 
 def main() -> None:

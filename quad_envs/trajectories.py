@@ -231,11 +231,20 @@ class RandomWaypoints(Trajectory):
     Args:
         waypoints: Waypoint array, shape B + (K, ndim).
         segment_time: Duration of each segment [s].
+        yaw_amplitude: In 3-D, yaw follows yaw_amplitude sin(2 pi t / yaw_period) [rad]
+            (0 by default; a sweep excites the yaw dynamics for identification).
+        yaw_period: Period of the yaw sweep [s].
     """
 
     name = "random"
 
-    def __init__(self, waypoints: FloatArray, segment_time: float = 2.0) -> None:
+    def __init__(
+        self,
+        waypoints: FloatArray,
+        segment_time: float = 2.0,
+        yaw_amplitude: float = 0.0,
+        yaw_period: float = 7.0,
+    ) -> None:
         self.waypoints = np.asarray(waypoints, dtype=np.float64)
         if self.waypoints.ndim < 2 or self.waypoints.shape[-1] not in (2, 3):
             raise ValueError(
@@ -243,6 +252,13 @@ class RandomWaypoints(Trajectory):
             )
         self.ndim = self.waypoints.shape[-1]
         self.segment_time = float(segment_time)
+        self.yaw_amplitude, self.yaw_period = float(yaw_amplitude), float(yaw_period)
+
+    def yaw(self, t: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The optional yaw sweep and its rate."""
+        w = 2 * np.pi / self.yaw_period
+        t = np.asarray(t, dtype=np.float64)
+        return self.yaw_amplitude * np.sin(w * t), self.yaw_amplitude * w * np.cos(w * t)
 
     @classmethod
     def sample(
@@ -254,12 +270,14 @@ class RandomWaypoints(Trajectory):
         high: tuple[float, ...] | None = None,
         segment_time: float = 2.0,
         batch_shape: tuple[int, ...] = (),
+        yaw_amplitude: float = 0.0,
+        yaw_period: float = 7.0,
     ) -> RandomWaypoints:
         """Draws waypoints uniformly in the box [low, high] (default 2 m wide around z = 1)."""
         low_arr = np.asarray(low if low is not None else (-1.0,) * (ndim - 1) + (0.5,))
         high_arr = np.asarray(high if high is not None else (1.0,) * (ndim - 1) + (1.5,))
         pts = rng.uniform(low_arr, high_arr, size=batch_shape + (num_waypoints, ndim))
-        return cls(pts, segment_time)
+        return cls(pts, segment_time, yaw_amplitude, yaw_period)
 
     def pva(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Quintic (minimum-jerk) interpolation between consecutive waypoints."""

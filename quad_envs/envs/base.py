@@ -428,7 +428,12 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             self._batched_traj = None
         elif all(isinstance(t, RandomWaypoints) for t in self._trajs):
             wps = np.stack([t.waypoints for t in self._trajs])  # type: ignore[attr-defined]
-            self._batched_traj = RandomWaypoints(wps, first.segment_time)  # type: ignore[attr-defined]
+            self._batched_traj = RandomWaypoints(
+                wps,
+                first.segment_time,
+                first.yaw_amplitude,
+                first.yaw_period,  # type: ignore[attr-defined]
+            )
         else:
             self._batched_traj = _ListTrajectory(self._trajs)
         if self.param_randomization > 0:
