@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from quad_envs.dynamics import _unpack
+
 _TOKEN = re.compile(r"[A-Za-z_]\w*\([^)]*\)|\S+")
 _FUNC = re.compile(r"^(sin|cos|tan|sec)\((?:(\d+)\s+)?([A-Za-z_]\w*)\)$")
 _POWER = re.compile(r"^([A-Za-z_]\w*)(?:\^(\d+))?$")
@@ -138,22 +140,31 @@ def _term_expr(term: Term, index: dict[str, str], cache: dict[str, str], lines: 
 def _header(
     state_names: Sequence[str], input_names: Sequence[str], xp: Any
 ) -> tuple[list[str], dict[str, str]]:
-    # numpy: ``.T`` puts the variable axis first (fastest for one state and for batches);
+    # numpy: ``.T`` puts the variable axis first (fastest for one state and for batches),
+    # after broadcasting the batch axes of X and U (only when they differ);
     # torch: ``movedim`` does the same without the deprecated n-d ``.T``.
     if xp is np:
-        lines = ["    X = X.T", "    U = U.T"]
+        lines = ["    X, U = _unpack(X, U)"]
     else:
-        lines = ["    X = X.movedim(-1, 0)", "    U = U.movedim(-1, 0)"]
-    lines.append("    one = xp.ones_like(X[0])")
+        lines = [
+            "    batch = xp.broadcast_shapes(X.shape[:-1], U.shape[:-1])",
+            "    X, U = X.expand(*batch, X.shape[-1]), U.expand(*batch, U.shape[-1])",
+            "    X = X.movedim(-1, 0)",
+            "    U = U.movedim(-1, 0)",
+        ]
     index = {name: f"X[{i}]" for i, name in enumerate(state_names)}
     index.update({name: f"U[{j}]" for j, name in enumerate(input_names)})
     return lines, index
 
 
-def _stack(exprs: list[str], xp: Any) -> str:
+def _finish(lines: list[str], exprs: list[str], xp: Any) -> None:
+    """Defines ``one`` if used, then stacks the expressions into (..., k)."""
+    if any("one" in e for e in exprs):
+        lines.insert(1 if xp is np else 4, "    one = xp.ones_like(X[0])")
     if xp is np:
-        return f"    return xp.array(xp.broadcast_arrays({', '.join(exprs)})).T"
-    return f"    return xp.stack(xp.broadcast_tensors({', '.join(exprs)}), -1)"
+        lines.append(f"    return xp.array(({', '.join(exprs)},)).T")
+    else:
+        lines.append(f"    return xp.stack(xp.broadcast_tensors({', '.join(exprs)}), -1)")
 
 
 def compile_features(
@@ -175,7 +186,7 @@ def compile_features(
     lines, index = _header(state_names, input_names, xp)
     cache: dict[str, str] = {}
     exprs = [_term_expr(t, index, cache, lines) for t in terms]
-    lines.append(_stack(exprs, xp))
+    _finish(lines, exprs, xp)
     return _build("theta", lines, xp)
 
 
@@ -210,13 +221,13 @@ def compile_rhs(
             if c != 0.0:
                 parts.append(f"({c!r}) * {_term_expr(term, index, cache, lines)}")
         rows.append(" + ".join(parts) if parts else "0.0 * one")
-    lines.append(_stack(rows, xp))
+    _finish(lines, rows, xp)
     return _build("rhs", lines, xp)
 
 
 def _build(fname: str, lines: list[str], xp: Any) -> Callable[[Any, Any], Any]:
     source = f"def {fname}(X, U):\n" + "\n".join(lines) + "\n"
-    namespace: dict[str, Any] = {"xp": xp}
+    namespace: dict[str, Any] = {"xp": xp, "_unpack": _unpack}
     exec(compile(source, f"<quad-sindy {fname}>", "exec"), namespace)  # noqa: S102 (names are parsed)
     func = namespace[fname]
     func.source = source

@@ -82,3 +82,41 @@ def bench_envs(
             }
         )
     return rows
+
+
+def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
+    """Steps/s of the ground truth, the compiled surrogate and a pysindy-``predict`` surrogate.
+
+    The models are the exact planar model (what ``reproduce`` identifies) in our library; the
+    ``predict`` surrogate is the same base env stepping a fitted ``ps.SINDy`` through
+    ``model.predict`` once per RK4 stage.
+    """
+    import pysindy as ps
+
+    from identification.data import Trajectory
+    from identification.libraries import paper_planar_library
+    from identification.model import model_from_truth
+    from quad_envs.simulate import simulate_case
+
+    model = model_from_truth("planar")
+    run = simulate_case("C")
+    data = Trajectory.from_run(run)
+    sindy = ps.SINDy(optimizer=ps.STLSQ(threshold=0.1), feature_library=paper_planar_library())
+    sindy.fit(data.x, t=data.dt, u=data.u, feature_names=[*data.state_names, *data.input_names])
+
+    def predict_rhs(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return sindy.predict(x[None, :], u=u[None, :])[0]
+
+    truth = single_env_rate("PlanarQuad-v0", min_seconds)
+    compiled = single_env_rate("PlanarQuadSINDy-v0", min_seconds, model=model)
+    slow = single_env_rate("PlanarQuad-v0", min_seconds / 4, rhs=predict_rhs)
+    return [
+        {"env": "PlanarQuad-v0 (ground truth)", "steps_per_s": truth, "ratio": 1.0},
+        {
+            "env": "PlanarQuadSINDy-v0 (compiled rhs)",
+            "steps_per_s": compiled,
+            "ratio": compiled / truth,
+        },
+        {"env": "surrogate via pysindy predict", "steps_per_s": slow, "ratio": slow / truth},
+        {"env": "compiled / predict", "steps_per_s": float("nan"), "ratio": compiled / slow},
+    ]

@@ -153,6 +153,136 @@ def study(
     typer.echo(f"wrote {path} and {path.with_suffix('.png')}")
 
 
+@bench_app.command("surrogate")
+def bench_surrogate_cmd(
+    seconds: Annotated[float, typer.Option(help="minimum timing per measurement [s]")] = 2.0,
+) -> None:
+    """Steps/s of a SINDy surrogate (compiled) against the truth and pysindy's predict."""
+    from quad_envs.bench import bench_surrogate
+
+    typer.echo(f"{'env':<36} {'steps/s':>10} {'ratio':>8}")
+    for row in bench_surrogate(seconds):
+        rate = "" if row["steps_per_s"] != row["steps_per_s"] else f"{row['steps_per_s']:,.0f}"
+        typer.echo(f"{row['env']:<36} {rate:>10} {row['ratio']:>8.2f}")
+
+
+class PolicyName(str, Enum):
+    """Policies for ``compare``."""
+
+    pd = "pd"
+    random = "random"
+
+
+@app.command()
+def compare(
+    model: Annotated[Path, typer.Option(help="identified model JSON")],
+    out: Annotated[Path, typer.Option(help="output folder")],
+    env: Annotated[str, typer.Option(help="ground-truth env id")] = "PlanarQuad-v0",
+    policy: Annotated[PolicyName, typer.Option(help="policy flown in both")] = PolicyName.pd,
+    case: Annotated[str, typer.Option(help="reference: A, B, C or a trajectory name")] = "A",
+    seed: Annotated[int, typer.Option(help="reset seed")] = 0,
+    tolerance: Annotated[float, typer.Option(help="state gap that counts as parting")] = 1e-3,
+) -> None:
+    """The same policy and initial state in the ground truth and in the surrogate."""
+    from agents.policies import make_policy
+    from identification.compare import compare_envs, write_comparison
+    from identification.model import load_model
+
+    try:
+        identified = load_model(model)
+        pol = make_policy(policy.value, env, seed=seed)
+        comp = compare_envs(identified, env, pol, case, seed, tolerance=tolerance)
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(str(exc))
+    summary = write_comparison(comp, out)
+    for name, value in summary["rmse"].items():
+        typer.echo(f"RMSE {name:<8} {value:.3e}")
+    parted = summary["divergence_time"]
+    typer.echo(
+        f"parted by > {tolerance:g}: " + ("never" if parted is None else f"at t = {parted:.2f} s")
+    )
+    typer.echo(f"wrote {out}/abs_error.png, states.csv, summary.json")
+
+
+class AlgoName(str, Enum):
+    """RL algorithms."""
+
+    ppo = "ppo"
+    sac = "sac"
+
+
+@app.command("train")
+def train_cmd(
+    out: Annotated[Path, typer.Option(help="output folder")],
+    env: Annotated[str, typer.Option(help="env id (truth or surrogate)")] = "PlanarQuad-v0",
+    algo: Annotated[AlgoName, typer.Option(help="algorithm")] = AlgoName.ppo,
+    steps: Annotated[int, typer.Option(help="training steps")] = 200_000,
+    seed: Annotated[int, typer.Option(help="seed")] = 0,
+    eval_every: Annotated[int, typer.Option(help="evaluate every N steps")] = 10_000,
+    model: Annotated[Path | None, typer.Option(help="model JSON for surrogate ids")] = None,
+) -> None:
+    """Trains PPO or SAC on the hover task (progress bar, periodic evaluation, curve, model)."""
+    from agents.train import train
+
+    kwargs = {"model": str(model)} if model else {}
+    result = train(env, algo.value, steps, out, seed, eval_every, env_kwargs=kwargs)
+    typer.echo(
+        f"final return {result['final_return']:.1f} +- {result['final_std']:.1f}; "
+        f"saved {result['model']}"
+    )
+
+
+@app.command("evaluate")
+def evaluate_cmd(
+    agent: Annotated[Path, typer.Option(help="saved stable-baselines3 model (.zip)")],
+    env: Annotated[str, typer.Option(help="env id")] = "PlanarQuad-v0",
+    algo: Annotated[AlgoName, typer.Option(help="algorithm of the saved model")] = AlgoName.ppo,
+    episodes: Annotated[int, typer.Option(help="episodes")] = 10,
+) -> None:
+    """Mean return of a trained agent on the hover task."""
+    from stable_baselines3 import PPO, SAC
+
+    from agents.policies import SB3Policy
+    from agents.train import HOVER_TASK, evaluate
+
+    if not agent.exists():
+        _fail(f"no such agent file: {agent}")
+    loaded = (PPO if algo is AlgoName.ppo else SAC).load(agent, device="cpu")
+    mean, std = evaluate(SB3Policy(loaded), env, episodes, **HOVER_TASK)
+    typer.echo(f"return {mean:.1f} +- {std:.1f} over {episodes} episodes")
+
+
+@app.command()
+def mbrl(
+    out: Annotated[Path, typer.Option(help="output folder")] = Path("out/mbrl"),
+    algo: Annotated[AlgoName, typer.Option(help="algorithm")] = AlgoName.ppo,
+    iterations: Annotated[int, typer.Option(help="model-based iterations")] = 4,
+    initial_real_steps: Annotated[int, typer.Option(help="random exploration steps")] = 2000,
+    real_steps: Annotated[int, typer.Option(help="on-policy real steps per iteration")] = 1000,
+    model_steps: Annotated[
+        int, typer.Option(help="surrogate training steps per iteration")
+    ] = 50_000,
+    baseline_steps: Annotated[int, typer.Option(help="model-free baseline steps")] = 200_000,
+    seed: Annotated[int, typer.Option(help="seed")] = 0,
+) -> None:
+    """Dyna-style SINDy model-based RL against model-free RL on the ground truth."""
+    from agents.mbrl import run_mbrl
+
+    res = run_mbrl(
+        out,
+        algo.value,
+        iterations,
+        initial_real_steps,
+        real_steps,
+        model_steps,
+        baseline_steps,
+        seed,
+    )
+    for key, value in res["summary"].items():
+        typer.echo(f"{key}: {value}")
+    typer.echo(f"wrote {out}/mbrl.json and {out}/mbrl.png")
+
+
 @app.command()
 def demo(
     out: Annotated[Path, typer.Option(help="output folder")] = Path("out/demo"),

@@ -1,0 +1,130 @@
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import quad_envs
+from agents.policies import (
+    OrnsteinUhlenbeckPolicy,
+    PDPolicy,
+    SB3Policy,
+    UniformRandomPolicy,
+    make_policy,
+)
+from agents.train import HOVER_TASK, evaluate, make_algo
+from identification.compare import compare_envs
+from identification.model import IdentifiedModel, model_from_truth
+from identification.surrogate import make_surrogate, register_surrogate
+
+
+@pytest.mark.parametrize(
+    "surrogate_id,system", [("PlanarQuadSINDy-v0", "planar"), ("Quad6DOFSINDy-v0", "quad6dof")]
+)
+def test_surrogate_ids_pass_check_env(tmp_path, surrogate_id, system):
+    path = model_from_truth(system).save(tmp_path / "m.json")
+    env = gym.make(surrogate_id, model=str(path), normalize_actions=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env.unwrapped)
+    venv = gym.make_vec(surrogate_id, num_envs=4, model=str(path))
+    obs, _ = venv.reset(seed=0)
+    assert obs.shape == (4, env.observation_space.shape[0])
+
+
+def test_exact_surrogate_follows_the_truth_for_1000_steps():
+    env = gym.make("PlanarQuad-v0", trajectory="figure8")
+    surrogate = register_surrogate(model_from_truth("planar"), "TestExact-v0", "PlanarQuad-v0")
+    senv = gym.make(surrogate, trajectory="figure8")
+    pd = PDPolicy(env)
+    obs, info = env.reset(seed=0)
+    senv.reset(seed=0)
+    worst = 0.0
+    for _ in range(1000):
+        action = pd(obs, info)  # actions from the truth, replayed open-loop on the surrogate
+        obs, _, term, trunc, info = env.step(action)
+        _, _, sterm, strunc, sinfo = senv.step(action)
+        worst = max(worst, np.abs(sinfo["state"] - info["state"]).max())
+        assert (term, trunc) == (sterm, strunc)
+    assert trunc and worst < 1e-6
+
+
+def test_a_divergent_model_terminates_cleanly():
+    model = model_from_truth("planar")
+    coef = model.coefficients.copy()
+    coef[3, model.feature_names.index("y_dot")] = 500.0  # y_dot' = 500 y_dot + ...: explodes
+    bad = IdentifiedModel(model.feature_names, coef, model.state_names, model.input_names, "planar")
+    env = gym.wrappers.TimeLimit(make_surrogate(bad, "PlanarQuad-v0", init_state_scale=0.5), 1000)
+    env.reset(seed=0)
+    hover = np.array([quad_envs.params.PAPER_PLANAR.hover_thrust, 0.0])
+    with np.errstate(all="ignore"):
+        for _ in range(1000):
+            obs, rew, term, trunc, info = env.step(hover)
+            assert np.all(np.isfinite(obs))
+            if term:
+                break
+    assert term and info["out_of_bounds"] and rew == 0.0
+
+
+def test_surrogate_rejects_mismatched_models():
+    with pytest.raises(ValueError, match="do not match"):
+        make_surrogate(model_from_truth("planar"), "Quad6DOF-v0")
+    with pytest.raises(ValueError, match="needs model"):
+        gym.make("PlanarQuadSINDy-v0")
+    with pytest.raises(ValueError, match="valid choices"):
+        make_surrogate(model_from_truth("planar"), "CartPole-v1")
+
+
+def test_compare_reports_no_divergence_for_the_exact_model():
+    comp = compare_envs(
+        model_from_truth("planar"), "PlanarQuad-v0", make_policy("pd", "PlanarQuad-v0"), "A"
+    )
+    assert comp.divergence_time is None and max(comp.rmse.values()) < 1e-9
+    biased = model_from_truth("planar")
+    biased.coefficients[5] *= 1.05  # 5 % error in 1/Ixx
+    biased._rhs = None
+    comp = compare_envs(
+        biased, "PlanarQuad-v0", make_policy("pd", "PlanarQuad-v0"), "A", tolerance=1e-4
+    )
+    assert comp.divergence_time is not None and comp.divergence_time < 10.0
+
+
+@pytest.mark.parametrize("policy_cls", [UniformRandomPolicy, OrnsteinUhlenbeckPolicy])
+def test_random_policies_stay_in_the_action_space(policy_cls):
+    env = gym.make("Quad6DOF-v0", **HOVER_TASK)
+    policy = policy_cls(env, seed=0)
+    obs, info = env.reset(seed=0)
+    actions = np.array([policy(obs, info) for _ in range(200)])
+    assert all(a in env.action_space for a in actions)
+    step = np.abs(np.diff(actions, axis=0)).mean()
+    if policy_cls is OrnsteinUhlenbeckPolicy:  # smooth: sigma sqrt(dt) = 0.06 per step
+        assert step < 0.1
+    else:  # independent uniform draws in [-1, 1]: mean jump 2/3
+        assert step > 0.5
+
+
+def test_pd_policy_in_normalised_space_hovers():
+    mean, _ = evaluate(
+        make_policy("pd", "PlanarQuad-v0", **HOVER_TASK), "PlanarQuad-v0", 2, **HOVER_TASK
+    )
+    assert mean > 900  # 1000 steps of reward <= 1 each
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_sb3_smoke_and_determinism(algo):
+    def run():
+        env = gym.make("PlanarQuad-v0", **HOVER_TASK)
+        kw = (
+            {"n_steps": 64, "batch_size": 32}
+            if algo == "ppo"
+            else {"learning_starts": 16, "batch_size": 16}
+        )
+        model = make_algo(algo, env, seed=3, **kw)
+        model.learn(128)
+        obs, _ = env.reset(seed=0)
+        return SB3Policy(model)(obs, {})
+
+    a, b = run(), run()
+    np.testing.assert_array_equal(a, b)
+    assert a.shape == (2,)
