@@ -31,7 +31,9 @@ from quad_envs.simulate import planar_system, simulate_closed_loop
 from quad_envs.trajectories import RandomWaypoints, make_trajectory
 
 STUDIES = ("lambda", "dt", "samples", "noise")
-FIELDS = ("study", "method", "x", "lambda", "n_terms", "missed", "spurious", "max_rel_error")
+FIELDS = (
+    "study", "method", "x", "lambda", "n_terms", "missed", "spurious", "max_rel_error", "error",
+)  # fmt: skip
 
 
 def training_data(
@@ -211,24 +213,21 @@ def run_study(study: str, out: str | Path, progress: bool = True) -> Path:
     done = {(r["method"], float(r["x"])) for r in rows}
     cases = _cases(study)
     todo = [c for c in cases if (c[0], float(c[1])) not in done]
-    for _, _, thunk in tqdm(
+    bar = tqdm(
         todo,
         desc=f"study {study}",
         disable=not progress,
         initial=len(cases) - len(todo),
         total=len(cases),
-    ):
+    )
+    for method, x, thunk in bar:
         with np.errstate(all="ignore"):
             try:
                 row = thunk()
             except (ValueError, np.linalg.LinAlgError) as exc:
-                row = {
-                    "study": study,
-                    "method": "?",
-                    "x": float("nan"),
-                    "max_rel_error": float("inf"),
-                    "error": str(exc),
-                }
+                # Recorded, not fatal: e.g. no stable flight at this sampling step.
+                row = {"study": study, "method": method, "x": x, "max_rel_error": float("inf"),
+                       "error": str(exc)}  # fmt: skip
         rows.append({k: row.get(k, "") for k in FIELDS})
         _write_rows(path, rows)  # after every case: an interruption loses at most one
     _plot(study, rows, out / f"{study}.png")
@@ -236,7 +235,10 @@ def run_study(study: str, out: str | Path, progress: bool = True) -> Path:
 
 
 def _write_rows(path: Path, rows: list[dict]) -> None:
-    lines = [",".join(FIELDS)] + [",".join(str(r.get(k, "")) for k in FIELDS) for r in rows]
+    def cell(value: object) -> str:
+        return str(value).replace(",", ";").replace("\n", " ")
+
+    lines = [",".join(FIELDS)] + [",".join(cell(r.get(k, "")) for k in FIELDS) for r in rows]
     atomic_write_text(path, "\n".join(lines) + "\n")
 
 
@@ -255,7 +257,9 @@ def _plot(study: str, rows: list[dict], path: Path) -> None:
             by_x = {float(r["x"]): r for r in rows if r["method"] == method}
             curves[method] = [float(by_x[x][metric]) if x in by_x else np.nan for x in xs]
             spurious[f"{method}: missed+spurious"] = [
-                int(by_x[x]["missed"]) + int(by_x[x]["spurious"]) if x in by_x else np.nan
+                int(by_x[x]["missed"]) + int(by_x[x]["spurious"])
+                if x in by_x and by_x[x]["missed"] != ""
+                else np.nan
                 for x in xs
             ]
         plot_curves(
