@@ -33,7 +33,7 @@ def _collect(policy: Any, steps: int, seed: int) -> list[Trajectory]:
     trajs, total, ep = [], 0, 0
     while total < steps:
         new = collect_rollouts(
-            ENV_ID, policy, 1, seed + ep, max_steps=steps - total + 1, env_kwargs=HOVER_TASK
+            ENV_ID, policy, 1, seed + ep, max_steps=max(steps - total, 10), env_kwargs=HOVER_TASK
         )
         ep += 1
         for tr in new:
