@@ -105,7 +105,7 @@ def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
     sindy.fit(data.x, t=data.dt, u=data.u, feature_names=[*data.state_names, *data.input_names])
 
     def predict_rhs(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        return sindy.predict(x[None, :], u=u[None, :])[0]
+        return np.asarray(sindy.predict(x[None, :], u=u[None, :]))[0]
 
     truth = single_env_rate("PlanarQuad-v0", min_seconds)
     compiled = single_env_rate("PlanarQuadSINDy-v0", min_seconds, model=model)
