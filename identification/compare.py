@@ -90,17 +90,14 @@ def compare_envs(
 
 def write_comparison(comp: EnvComparison, out: str | Path, title: str = "") -> dict[str, Any]:
     """Absolute-error plot, states CSV and summary JSON into ``out``."""
-    from identification.plots import _plt, _save
+    from identification.plots import _save, state_grid
     from quad_envs.io import write_csv, write_json
 
     out = Path(out)
-    plt = _plt()
     names = comp.state_names
-    ncols = 3
-    nrows = int(np.ceil(len(names) / ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(12, 2.4 * nrows), sharex=True)
+    fig, axes = state_grid(names)
     err = np.abs(comp.surrogate - comp.truth)
-    for i, (ax, name) in enumerate(zip(axes.ravel(), names, strict=False)):
+    for i, (ax, name) in enumerate(zip(axes, names, strict=False)):
         ax.semilogy(comp.t, np.maximum(err[:, i], 1e-18))
         ax.axhline(comp.tolerance, color="tab:red", lw=0.8, ls="--")
         ax.set_ylabel(f"|error| {name}")

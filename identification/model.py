@@ -81,13 +81,11 @@ class IdentifiedModel:
             self._theta = compile_features(self.feature_names, self.state_names, self.input_names)
         return self._theta(x, u)
 
-    def torch_rhs(self, device: Any = None, dtype: Any = None) -> Callable[[Any, Any], Any]:
-        """A batched torch version of :meth:`rhs` (differentiable; any device and dtype).
+    def torch_rhs(self) -> Callable[[Any, Any], Any]:
+        """A batched torch version of :meth:`rhs`: differentiable, on any device and dtype.
 
-        Args:
-            device: Torch device of the inputs (coefficients are baked in as Python floats,
-                so the function runs wherever its inputs live).
-            dtype: Unused placeholder for symmetry; the result follows the inputs' dtype.
+        The coefficients are baked into the generated code as Python numbers, so the function
+        runs on whatever device its input tensors live and returns their dtype.
 
         Returns:
             rhs(x, u) on tensors of shape (..., n) and (..., m).

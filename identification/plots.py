@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -30,24 +31,27 @@ def _save(fig, path: str | Path) -> Path:
     return path
 
 
+def state_grid(names: Sequence[str], ncols: int = 3) -> tuple[Any, np.ndarray]:
+    """A figure with one panel per state (shared time axis), panels in reading order."""
+    plt = _plt()
+    nrows = int(np.ceil(len(names) / ncols))
+    fig, axes = plt.subplots(nrows, ncols, figsize=(12, 2.4 * nrows), sharex=True, squeeze=False)
+    for ax in axes.ravel()[len(names) :]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]")
+    return fig, axes.ravel()
+
+
 def plot_comparison(comp: ClosedLoopComparison, path: str | Path, title: str = "") -> Path:
     """States of truth and model under the same controller (the paper's response figures)."""
-    plt = _plt()
     names = comp.truth.system.state_names
-    ncols = 3
-    fig, axes = plt.subplots(
-        int(np.ceil(len(names) / ncols)),
-        ncols,
-        figsize=(12, 2.4 * np.ceil(len(names) / ncols)),
-        sharex=True,
-    )
-    for i, (ax, name) in enumerate(zip(axes.ravel(), names, strict=False)):
+    fig, axes = state_grid(names)
+    for i, (ax, name) in enumerate(zip(axes, names, strict=False)):
         ax.plot(comp.truth.t, comp.truth.states[:, i], label="ground truth", lw=2)
         ax.plot(comp.model.t, comp.model.states[:, i], "--", label="identified", lw=1.5)
         ax.set_ylabel(name)
-    axes.ravel()[0].legend(fontsize=8)
-    for ax in axes[-1]:
-        ax.set_xlabel("t [s]")
+    axes[0].legend(fontsize=8)
     fig.suptitle(title)
     return _save(fig, path)
 
@@ -56,24 +60,14 @@ def plot_abs_error(
     comps: dict[str, ClosedLoopComparison], path: str | Path, title: str = ""
 ) -> Path:
     """|model - truth| over time per state, log scale, one line per run."""
-    plt = _plt()
-    first = next(iter(comps.values()))
-    names = first.truth.system.state_names
-    ncols = 3
-    fig, axes = plt.subplots(
-        int(np.ceil(len(names) / ncols)),
-        ncols,
-        figsize=(12, 2.4 * np.ceil(len(names) / ncols)),
-        sharex=True,
-    )
+    names = next(iter(comps.values())).truth.system.state_names
+    fig, axes = state_grid(names)
     for label, comp in comps.items():
         err = comp.abs_error
-        for i, (ax, name) in enumerate(zip(axes.ravel(), names, strict=False)):
+        for i, (ax, name) in enumerate(zip(axes, names, strict=False)):
             ax.semilogy(comp.truth.t, np.maximum(err[:, i], 1e-18), label=label)
             ax.set_ylabel(f"|error| {name}")
-    axes.ravel()[0].legend(fontsize=8)
-    for ax in axes[-1]:
-        ax.set_xlabel("t [s]")
+    axes[0].legend(fontsize=8)
     fig.suptitle(title)
     return _save(fig, path)
 

@@ -57,9 +57,8 @@ class System:
         x0 = np.zeros(self.n_states)
         if self.name == "planar":
             x0[0:2], x0[3:5] = ref0[0:2], ref0[2:4]
-        else:  # body velocity equals inertial velocity at zero attitude
-            x0[0:3], x0[6:9] = ref0[0:3], ref0[3:6]
-            x0[5] = ref0[9]
+        else:  # body velocity: the inertial one rotated by the yaw only
+            x0[0:3], x0[5] = ref0[0:3], ref0[9]
             x0[6:9] = dynamics.rotation_zxy(0.0, 0.0, ref0[9]).T @ ref0[3:6]
         return x0
 

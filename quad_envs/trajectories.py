@@ -62,6 +62,32 @@ def _stack(*cols: FloatArray) -> FloatArray:
     return np.stack(np.broadcast_arrays(*cols), axis=-1)
 
 
+def _trapezoid(t: FloatArray, v_max: float, a_max: float) -> tuple[FloatArray, ...]:
+    """Rest-to-rest trapezoidal velocity profile along a line (the authors' segments).
+
+    Accelerate at a_max to v_max, cruise, brake, then hold 2 v_max^2 / a_max; each phase
+    lasts v_max / a_max (boundaries inclusive on the left phase, as in the MATLAB code).
+
+    Returns:
+        Distance, speed and acceleration along the line at t.
+    """
+    t1, t2, t3 = v_max / a_max, 2 * v_max / a_max, 3 * v_max / a_max
+    d1, d2, d3 = t, t - t1, t - t2
+    conds = [t <= t1, t <= t2, t <= t3]
+    acc = np.select(conds, [a_max, 0.0, -a_max], 0.0)
+    vel = np.select(conds, [a_max * d1, v_max, v_max - a_max * d3], 0.0)
+    pos = np.select(
+        conds,
+        [
+            0.5 * a_max * d1**2,
+            v_max**2 / (2 * a_max) + v_max * d2,
+            3 * v_max**2 / (2 * a_max) + v_max * d3 - 0.5 * a_max * d3**2,
+        ],
+        2 * v_max**2 / a_max,
+    )
+    return pos, vel, acc
+
+
 class Hover(Trajectory):
     """Hold a fixed point.
 
@@ -108,21 +134,8 @@ class PaperSine(Trajectory):
 
     def pva(self, t: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Position, velocity and acceleration of the authors' sine reference."""
-        vm, am = self.v_max, self.a_max
-        t1, t2, t3 = vm / am, 2 * vm / am, 3 * vm / am
-        d1, d2, d3 = t, t - t1, t - t2
-        conds = [t <= t1, t <= t2, t <= t3]
-        acc_y = np.select(conds, [am, 0.0, -am], 0.0)
-        vel_y = np.select(conds, [am * d1, vm, vm - am * d3], 0.0)
-        pos_y = np.select(
-            conds,
-            [
-                0.5 * am * d1**2,
-                vm**2 / (2 * am) + vm * d2,
-                3 * vm**2 / (2 * am) + vm * d3 - 0.5 * am * d3**2,
-            ],
-            2 * vm**2 / am,
-        )
+        pos_y, vel_y, acc_y = _trapezoid(t, self.v_max, self.a_max)
+        t3 = 3 * self.v_max / self.a_max
         omega = 4 * np.pi / t3
         before = t < t3
         pos_z = np.where(before, 0.25 * (1 - np.cos(omega * t)), 0.25 * (1 - np.cos(omega * t3)))
@@ -166,20 +179,7 @@ class PaperDiamond(Trajectory):
         corner = self.corners[corner_index]
         theta = np.pi / 4 - np.floor(guarded / t_seg) * np.pi / 2
 
-        ta, tb, tc = vm / am, 2 * vm / am, 3 * vm / am
-        conds = [t_prune <= ta, t_prune <= tb, t_prune <= tc]
-        d1, d2, d3 = t_prune, t_prune - ta, t_prune - tb
-        acc = np.select(conds, [am, 0.0, -am], 0.0)
-        vel = np.select(conds, [am * d1, vm, vm - am * d3], 0.0)
-        pos = np.select(
-            conds,
-            [
-                0.5 * am * d1**2,
-                vm**2 / (2 * am) + vm * d2,
-                3 * vm**2 / (2 * am) + vm * d3 - 0.5 * am * d3**2,
-            ],
-            2 * vm**2 / am,
-        )
+        pos, vel, acc = _trapezoid(t_prune, vm, am)
         c, s = np.cos(theta), np.sin(theta)
         pos_out = corner + _stack(c * pos, s * pos)
         return pos_out, _stack(c * vel, s * vel), _stack(c * acc, s * acc)
