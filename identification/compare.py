@@ -55,22 +55,26 @@ def _rollout(
 def compare_envs(
     model: IdentifiedModel,
     env_id: str,
-    policy: Callable[[np.ndarray, dict[str, Any]], np.ndarray],
+    make_policy: Callable[[], Callable[[np.ndarray, dict[str, Any]], np.ndarray]],
     trajectory: str = "hover",
     seed: int = 0,
     steps: int = 1000,
     tolerance: float = 1e-3,
     env_kwargs: dict[str, Any] | None = None,
 ) -> EnvComparison:
-    """Flies ``policy`` in ``env_id`` and in the surrogate of ``model`` from the same start."""
+    """Flies a policy in ``env_id`` and in the surrogate of ``model`` from the same start.
+
+    ``make_policy`` is called once per env, so a stochastic policy draws the same action
+    noise in both (a shared policy object would continue its random stream instead).
+    """
     kwargs = {"trajectory": trajectory, **(env_kwargs or {})}
     truth_env = gym.make(env_id, **kwargs)
     surrogate_env = gym.wrappers.TimeLimit(
         make_surrogate(model, env_id, **kwargs), truth_env.spec.max_episode_steps
     )
-    truth = _rollout(truth_env, policy, seed, None, steps)
+    truth = _rollout(truth_env, make_policy(), seed, None, steps)
     with np.errstate(all="ignore"):
-        surrogate = _rollout(surrogate_env, policy, seed, None, steps)
+        surrogate = _rollout(surrogate_env, make_policy(), seed, None, steps)
     n = min(len(truth), len(surrogate))
     padded = np.full_like(truth, np.nan)
     padded[:n] = surrogate[:n]

@@ -190,8 +190,12 @@ def compare(
 
     try:
         identified = load_model(model)
-        pol = make_policy(policy.value, env, seed=seed)
-        comp = compare_envs(identified, env, pol, case, seed, tolerance=tolerance)
+        make_policy(policy.value, env, seed=seed)  # validates the names before flying
+
+        def factory() -> object:
+            return make_policy(policy.value, env, seed=seed)
+
+        comp = compare_envs(identified, env, factory, case, seed, tolerance=tolerance)
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc))
     summary = write_comparison(comp, out)

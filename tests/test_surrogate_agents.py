@@ -77,16 +77,21 @@ def test_surrogate_rejects_mismatched_models():
 
 
 def test_compare_reports_no_divergence_for_the_exact_model():
-    comp = compare_envs(
-        model_from_truth("planar"), "PlanarQuad-v0", make_policy("pd", "PlanarQuad-v0"), "A"
-    )
-    assert comp.divergence_time is None and max(comp.rmse.values()) < 1e-9
+    for name in ("pd", "random"):  # a stochastic policy must draw the same actions in both
+
+        def factory(name=name):
+            return make_policy(name, "PlanarQuad-v0", seed=5)
+
+        comp = compare_envs(model_from_truth("planar"), "PlanarQuad-v0", factory, "A")
+        assert comp.divergence_time is None and max(comp.rmse.values()) < 1e-9
     biased = model_from_truth("planar")
     biased.coefficients[5] *= 1.05  # 5 % error in 1/Ixx
     biased._rhs = None
-    comp = compare_envs(
-        biased, "PlanarQuad-v0", make_policy("pd", "PlanarQuad-v0"), "A", tolerance=1e-4
-    )
+
+    def pd():
+        return make_policy("pd", "PlanarQuad-v0")
+
+    comp = compare_envs(biased, "PlanarQuad-v0", pd, "A", tolerance=1e-4)
     assert comp.divergence_time is not None and comp.divergence_time < 10.0
 
 
