@@ -318,9 +318,6 @@ class Embedded3D(Trajectory):
         return tuple(out)  # type: ignore[return-value]
 
 
-PAPER_CASES: dict[str, type[Trajectory]] = {"A": PaperStep, "B": PaperSine, "C": PaperDiamond}
-"""The paper's three test cases by letter."""
-
 TRAJECTORY_NAMES: tuple[str, ...] = ("hover", "step", "sine", "diamond", "figure8", "random")
 """Names accepted by :func:`make_trajectory` (``A``/``B``/``C`` are aliases of the paper cases)."""
 

@@ -17,6 +17,7 @@ from identification.data import (
 from identification.features import compile_features, compile_rhs, parse_term, term_name
 from identification.fit import FitConfig, fit
 from identification.libraries import (
+    generic_library,
     library_names,
     paper_planar_library,
     planar_library,
@@ -163,6 +164,13 @@ def test_ours_recovers_the_planar_model_exactly(case_c, optimizer):
     _check(model, planar_truth(), PS, 1e-10)
 
 
+def test_generic_library_holds_the_truth_and_recovers_it(case_c):
+    lib = generic_library(PS, PI, angle_names=["phi"], degree=2, n_frequencies=2)
+    assert len(lib) == len(set(lib)) and "sin(phi) u1" in lib and "phi" not in lib
+    model = fit([case_c], lib, FitConfig(lam=1e-3), "planar")
+    _check(model, planar_truth(), PS, 1e-8)
+
+
 def test_ours_on_the_authors_file(reference_case_c):
     from tests.conftest import REFERENCE_CSV
 
@@ -224,6 +232,13 @@ def test_model_round_trip_and_pickle(tmp_path, case_c):
     again = load_model(path)
     np.testing.assert_array_equal(again.coefficients, model.coefficients)
     np.testing.assert_array_equal(again.rhs(case_c.x, case_c.u), model.rhs(case_c.x, case_c.u))
+    # the compiled straight-line rhs is the library times the coefficients
+    np.testing.assert_allclose(
+        model.rhs(case_c.x, case_c.u),
+        model.theta(case_c.x, case_c.u) @ model.coefficients.T,
+        rtol=1e-12,
+        atol=1e-9,
+    )
     clone = pickle.loads(pickle.dumps(model))
     np.testing.assert_array_equal(clone.rhs(case_c.x, case_c.u), model.rhs(case_c.x, case_c.u))
     assert "\\dot{\\phi}" in "\n".join(model.equations(latex=True))

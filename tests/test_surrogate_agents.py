@@ -20,7 +20,7 @@ from identification.surrogate import make_surrogate, register_surrogate
 
 
 @pytest.mark.parametrize(
-    "surrogate_id,system", [("PlanarQuadSINDy-v0", "planar"), ("Quad6DOFSINDy-v0", "quad6dof")]
+    "surrogate_id,system", zip(quad_envs.SURROGATE_IDS, ["planar", "quad6dof"], strict=True)
 )
 def test_surrogate_ids_pass_check_env(tmp_path, surrogate_id, system):
     path = model_from_truth(system).save(tmp_path / "m.json")

@@ -402,6 +402,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         options = self._check_options(options)
         self._trajs = [None] * self.num_envs  # type: ignore[list-item]
         self._reset_members(np.ones(self.num_envs, dtype=bool), options.get("state"))
+        self._refresh_episode_tables()
         clean = self.vehicle.observe(self._states, self._references())
         return self._finish_obs(clean, self._batch_noise, False), {}
 
@@ -418,10 +419,24 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
                 raise ValueError("options['state'] must be finite")
             self._states[mask] = x0[mask]
         self._k[mask] = 0
-        self._refresh_episode_tables()
+
+    def _update_episode_rows(self, mask: FloatArray) -> None:
+        """After an autoreset: writes the new members' waypoints and parameters in place.
+
+        Shared references need nothing; a ``_ListTrajectory`` holds ``self._trajs`` itself;
+        the batched parameter arrays are the ones the rhs holds, so row writes reach it.
+        """
+        rows = np.flatnonzero(mask)
+        if isinstance(self._batched_traj, RandomWaypoints):
+            for i in rows:
+                self._batched_traj.waypoints[i] = self._trajs[i].waypoints  # type: ignore[attr-defined]
+        if self.param_randomization > 0:
+            for name, values in self._batched_params.items():
+                for i in rows:
+                    values[i] = getattr(self._params_list[i], name)
 
     def _refresh_episode_tables(self) -> None:
-        """Rebuilds the batched reference source and, if randomised, batched parameters."""
+        """Builds the batched reference source and, if randomised, batched parameters."""
         first = self._trajs[0]
         if all(t is first for t in self._trajs):
             self._shared_refs = first(self._t_table)
@@ -437,12 +452,12 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         else:
             self._batched_traj = _ListTrajectory(self._trajs)
         if self.param_randomization > 0:
-            batched = {
+            self._batched_params = {
                 f.name: np.array([getattr(p, f.name) for p in self._params_list])
                 for f in fields(self.params)
                 if f.name in self.vehicle.randomized_fields
             }
-            params = self.params.replace(**batched)
+            params = self.params.replace(**self._batched_params)
             system = self.vehicle.make_system(params)
             self._rhs, self._saturate = system.rhs, system.saturate
         else:
@@ -474,6 +489,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self._k += 1
         if resetting.any():
             self._reset_members(resetting)
+            self._update_episode_rows(resetting)
         refs = self._references()
         terminated = out_of_bounds(self._states, self._x_low, self._x_high) & ~resetting
         clean = self.vehicle.observe(self._states, refs)
