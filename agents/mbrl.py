@@ -19,11 +19,12 @@ import gymnasium as gym
 
 from agents.policies import OrnsteinUhlenbeckPolicy, SB3Policy
 from agents.train import HOVER_TASK, evaluate, make_algo, train
-from identification.data import Trajectory, collect_rollouts
+from identification.data import Trajectory
 from identification.fit import FitConfig, fit
 from identification.libraries import default_library
+from identification.rollouts import collect_rollouts
 from identification.surrogate import make_surrogate
-from quad_envs.io import write_json
+from quad_envs.fileio import write_json
 
 ENV_ID = "PlanarQuad-v0"
 
@@ -125,7 +126,7 @@ def run_mbrl(
 
 
 def _plot(results: dict[str, Any], path: Path) -> None:
-    from identification.plots import _plt, _save
+    from identification.experiments.plots import _plt, _save
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 4.2))

@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 
 import quad_envs  # noqa: F401 (registers the ids)
-from quad_envs.io import write_csv
+from quad_envs.fileio import write_csv
 
 ALGOS = ("ppo", "sac")
 HOVER_TASK = {"trajectory": "hover", "normalize_actions": True, "init_state_scale": 1.0}

@@ -3,18 +3,17 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from identification.features import compile_features, compile_rhs, parse_term, term_latex, term_name
+from quad_envs.fileio import write_json
 from quad_envs.integrators import rk4_step
-from quad_envs.io import write_json
-from quad_envs.simulate import ClosedLoopRun, get_system, simulate_closed_loop
-from quad_envs.trajectories import Trajectory as Reference
+from quad_envs.simulate import get_system
 
 SCHEMA = "quad-sindy/model"
 SCHEMA_VERSION = 1
@@ -148,20 +147,6 @@ class IdentifiedModel:
             out[k + 1] = x
         return out
 
-    def simulate_closed_loop(
-        self,
-        reference: Reference,
-        controller: Callable | None = None,
-        dt: float = 0.01,
-        duration: float = 10.0,
-        x0: np.ndarray | None = None,
-    ) -> ClosedLoopRun:
-        """Flies the model under a controller (its system's PD by default), with saturation."""
-        if self.system is None:
-            raise ValueError("closed-loop simulation needs a model of a known system (system=...)")
-        sys_ = replace(get_system(self.system), rhs=self.rhs)
-        return simulate_closed_loop(sys_, reference, controller, dt, duration, x0)
-
     # -- persistence ------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (schema-versioned)."""
@@ -230,16 +215,3 @@ def load_model(path: str | Path) -> IdentifiedModel:
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: malformed JSON ({exc})") from None
     return IdentifiedModel.from_dict(data, source=str(path))
-
-
-def model_from_truth(system: str, feature_names: Sequence[str] | None = None) -> IdentifiedModel:
-    """The ground truth written as a model in a library (default: the system's library)."""
-    from identification.libraries import default_library
-    from identification.truth import truth_for, truth_matrix
-
-    sys_ = get_system(system)
-    names = list(feature_names) if feature_names is not None else default_library(system)
-    xi = truth_matrix(truth_for(system), sys_.state_names, names)
-    return IdentifiedModel(
-        names, xi, sys_.state_names, sys_.input_names, system, {"method": "truth"}
-    )

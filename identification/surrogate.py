@@ -12,44 +12,47 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-from gymnasium.envs.registration import register, registry
+from gymnasium.envs.registration import load_env_creator, register, registry
 
+import quad_envs
 from identification.model import IdentifiedModel, load_model
 
-BASES = {
-    "PlanarQuad-v0": ("quad_envs.envs.planar", "PlanarQuadEnv", "PlanarQuadVectorEnv"),
-    "Quad6DOF-v0": ("quad_envs.envs.quad6dof", "Quad6DOFEnv", "Quad6DOFVectorEnv"),
-}
+
+def _base_class(base_id: str, vector: bool) -> Any:
+    """The env class registered as ``base_id`` (its vector class with ``vector``)."""
+    problem = f"{base_id!r} is not a quadrotor env; valid choices: {', '.join(quad_envs.ENV_IDS)}"
+    try:
+        spec = gym.spec(base_id)
+    except gym.error.Error:
+        raise ValueError(problem) from None
+    entry = spec.vector_entry_point if vector else spec.entry_point
+    cls = load_env_creator(entry) if isinstance(entry, str) else entry
+    if not isinstance(cls, type) or not hasattr(cls, "vehicle"):
+        raise ValueError(problem)
+    return cls
 
 
-def _resolve(
-    model: IdentifiedModel | str | Path | None, base_id: str
-) -> tuple[IdentifiedModel, Any]:
-    import importlib
-
-    if base_id not in BASES:
-        raise ValueError(f"unknown base env {base_id!r}; valid choices: {', '.join(BASES)}")
+def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: bool) -> tuple:
+    cls = _base_class(base_id, vector)
     if model is None:
         raise ValueError("a surrogate env needs model= (a model object or a model JSON path)")
     if not isinstance(model, IdentifiedModel):
         model = load_model(model)
-    module = importlib.import_module(BASES[base_id][0])
-    single = getattr(module, BASES[base_id][1])
-    system = single.vehicle.make_system(single.vehicle.default_params)
+    system = cls.vehicle.make_system(cls.vehicle.default_params)
     if (model.state_names, model.input_names) != (system.state_names, system.input_names):
         raise ValueError(
             f"model variables {model.state_names} / {model.input_names} do not match {base_id}'s "
             f"{system.state_names} / {system.input_names}"
         )
-    return model, module
+    return model, cls
 
 
 def make_surrogate(
     model: IdentifiedModel | str | Path | None = None, base_id: str = "PlanarQuad-v0", **kwargs: Any
 ) -> gym.Env:
     """A single surrogate env: the base env stepping ``model.rhs``."""
-    model, module = _resolve(model, base_id)
-    env = getattr(module, BASES[base_id][1])(rhs=model.rhs, **kwargs)
+    model, cls = _resolve(model, base_id, vector=False)
+    env = cls(rhs=model.rhs, **kwargs)
     env.model = model
     return env
 
@@ -61,8 +64,8 @@ def make_surrogate_vector(
     **kwargs: Any,
 ) -> gym.vector.VectorEnv:
     """A native vector surrogate env (batched ``model.rhs``)."""
-    model, module = _resolve(model, base_id)
-    env = getattr(module, BASES[base_id][2])(num_envs=num_envs, rhs=model.rhs, **kwargs)
+    model, cls = _resolve(model, base_id, vector=True)
+    env = cls(num_envs=num_envs, rhs=model.rhs, **kwargs)
     env.model = model
     return env
 
@@ -78,7 +81,7 @@ def register_surrogate(
     Returns:
         The id, ready for ``gym.make(env_id)`` and ``gym.make_vec(env_id, n)``.
     """
-    model, _ = _resolve(model, base_id)
+    model, _ = _resolve(model, base_id, vector=False)
     if env_id in registry:
         del registry[env_id]
     register(

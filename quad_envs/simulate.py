@@ -20,7 +20,7 @@ from quad_envs.params import PAPER_6DOF, PAPER_PLANAR, PlanarQuadParams, Quad6DO
 from quad_envs.trajectories import (
     PLANAR_REF_NAMES,
     SPATIAL_REF_NAMES,
-    Trajectory,
+    Reference,
     make_trajectory,
 )
 from quad_envs.types import FloatArray
@@ -139,7 +139,7 @@ class ClosedLoopRun:
 
 def simulate_closed_loop(
     system: System,
-    trajectory: Trajectory,
+    trajectory: Reference,
     controller: Controller | None = None,
     dt: float = 0.01,
     duration: float = 10.0,

@@ -23,7 +23,7 @@ SPATIAL_REF_NAMES: tuple[str, ...] = (
 )  # fmt: skip
 
 
-class Trajectory:
+class Reference:
     """Base class: a smooth (or piecewise) path in the y-z plane or in 3-D space.
 
     Subclasses implement :meth:`pva` returning position, velocity and acceleration arrays of
@@ -88,7 +88,7 @@ def _trapezoid(t: FloatArray, v_max: float, a_max: float) -> tuple[FloatArray, .
     return pos, vel, acc
 
 
-class Hover(Trajectory):
+class Hover(Reference):
     """Hold a fixed point.
 
     Args:
@@ -108,7 +108,7 @@ class Hover(Trajectory):
         return pos, zeros, zeros.copy()
 
 
-class PaperStep(Trajectory):
+class PaperStep(Reference):
     """Paper case A: (0, 0) before 1 s, then a step to (0.5, 0.2) (authors' ``traj_step.m``)."""
 
     name = "step"
@@ -121,7 +121,7 @@ class PaperStep(Trajectory):
         return pos, zeros, zeros.copy()
 
 
-class PaperSine(Trajectory):
+class PaperSine(Reference):
     """Paper case B: trapezoidal velocity in y, one-cosine bumps in z (``traj_sine.m``).
 
     y accelerates at 2 m/s^2 to 2 m/s, cruises, brakes, and stops at y = 4 m at t = 3 s;
@@ -144,7 +144,7 @@ class PaperSine(Trajectory):
         return _stack(pos_y, pos_z), _stack(vel_y, vel_z), _stack(acc_y, acc_z)
 
 
-class PaperDiamond(Trajectory):
+class PaperDiamond(Reference):
     """Paper case C: a diamond of four 0.5 m sides from (0, 1.8) (``traj_diamond.m``).
 
     Each side takes 2 s (0.5 s accelerate at 1 m/s^2, 0.5 s cruise at 0.5 m/s, 0.5 s brake,
@@ -185,7 +185,7 @@ class PaperDiamond(Trajectory):
         return pos_out, _stack(c * vel, s * vel), _stack(c * acc, s * acc)
 
 
-class Figure8(Trajectory):
+class Figure8(Reference):
     """A lemniscate: y = a sin(w t), z = z0 + (a/2) sin(2 w t) in the plane.
 
     In 3-D (``ndim=3``) the figure lies horizontally: x = a sin(w t), y = (a/2) sin(2 w t),
@@ -220,7 +220,7 @@ class Figure8(Trajectory):
         return tuple(_stack(lat[i], lon[i], z[i]) for i in range(3))  # type: ignore[return-value]
 
 
-class RandomWaypoints(Trajectory):
+class RandomWaypoints(Reference):
     """Smooth random flight through waypoints joined by minimum-jerk (quintic) segments.
 
     Rest-to-rest segments of ``segment_time`` seconds between waypoints drawn uniformly from a
@@ -299,12 +299,12 @@ class RandomWaypoints(Trajectory):
         return start + s * delta, ds * delta, dds * delta
 
 
-class Embedded3D(Trajectory):
+class Embedded3D(Reference):
     """A planar (y-z) trajectory flown in space at x = 0 with zero yaw."""
 
     ndim = 3
 
-    def __init__(self, planar: Trajectory) -> None:
+    def __init__(self, planar: Reference) -> None:
         if planar.ndim != 2:
             raise ValueError("Embedded3D wraps a planar trajectory")
         self.planar = planar
@@ -324,7 +324,7 @@ TRAJECTORY_NAMES: tuple[str, ...] = ("hover", "step", "sine", "diamond", "figure
 
 def make_trajectory(
     name: str, ndim: int = 2, rng: np.random.Generator | None = None, **kwargs: object
-) -> Trajectory:
+) -> Reference:
     """Builds a trajectory by name.
 
     Args:

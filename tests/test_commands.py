@@ -4,8 +4,8 @@ import json
 import numpy as np
 import pytest
 
-from identification import study
-from identification.reproduce import PAPER_PUBLISHED_RMSE, run
+from identification.experiments import study
+from identification.experiments.reproduce import PAPER_PUBLISHED_RMSE, run
 
 
 def test_reproduce_end_to_end(tmp_path, reference_case_c):

@@ -8,11 +8,17 @@ import torch
 
 from identification.data import (
     Trajectory,
-    excitation_rollouts,
     load_npz,
     read_csv,
     save_npz,
     write_trajectory_csv,
+)
+from identification.experiments.paper import fit_paper
+from identification.experiments.truth import (
+    compare_coefficients,
+    model_from_truth,
+    planar_truth,
+    quad6dof_truth,
 )
 from identification.features import compile_features, compile_rhs, parse_term, term_name
 from identification.fit import FitConfig, fit
@@ -23,9 +29,8 @@ from identification.libraries import (
     planar_library,
     quad6dof_library,
 )
-from identification.model import IdentifiedModel, load_model, model_from_truth
-from identification.paper import fit_paper
-from identification.truth import compare_coefficients, planar_truth, quad6dof_truth
+from identification.model import IdentifiedModel, load_model
+from identification.rollouts import excitation_rollouts
 from quad_envs.dynamics import (
     PLANAR_INPUT_NAMES as PI,
 )

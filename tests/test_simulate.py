@@ -12,7 +12,7 @@ def test_case_c_reproduces_the_authors_run(reference_case_c, tmp_path):
     """The simulate command writes the authors' published case C run to 1e-9."""
     out = tmp_path / "c.csv"
     subprocess.run(
-        [sys.executable, "-m", "quad_envs", "simulate", "--case", "C", "--out", str(out)],
+        [sys.executable, "-m", "quad_sindy", "simulate", "--case", "C", "--out", str(out)],
         check=True,
         capture_output=True,
     )

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
+import identification
 import quad_envs
 from agents.policies import (
     OrnsteinUhlenbeckPolicy,
@@ -14,13 +15,14 @@ from agents.policies import (
     make_policy,
 )
 from agents.train import HOVER_TASK, evaluate, make_algo
-from identification.compare import compare_envs
-from identification.model import IdentifiedModel, model_from_truth
+from identification.experiments.compare import compare_envs
+from identification.experiments.truth import model_from_truth
+from identification.model import IdentifiedModel
 from identification.surrogate import make_surrogate, register_surrogate
 
 
 @pytest.mark.parametrize(
-    "surrogate_id,system", zip(quad_envs.SURROGATE_IDS, ["planar", "quad6dof"], strict=True)
+    "surrogate_id,system", zip(identification.SURROGATE_IDS, ["planar", "quad6dof"], strict=True)
 )
 def test_surrogate_ids_pass_check_env(tmp_path, surrogate_id, system):
     path = model_from_truth(system).save(tmp_path / "m.json")

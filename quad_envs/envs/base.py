@@ -21,7 +21,7 @@ from gymnasium.vector.utils import batch_space
 from quad_envs.integrators import Rhs, rk4_step
 from quad_envs.simulate import System
 from quad_envs.tasks import FlightVolume, out_of_bounds, tracking_reward
-from quad_envs.trajectories import RandomWaypoints, Trajectory, make_trajectory
+from quad_envs.trajectories import RandomWaypoints, Reference, make_trajectory
 from quad_envs.types import FloatArray
 
 
@@ -68,7 +68,7 @@ class _EnvCore:
 
     def _configure(
         self,
-        trajectory: str | Trajectory,
+        trajectory: str | Reference,
         dt: float,
         substeps: int,
         duration: float,
@@ -121,8 +121,8 @@ class _EnvCore:
         self._n_table = int(round(self.duration / self.dt)) + 1
         self._t_table = np.arange(self._n_table) * self.dt
 
-    def _check_trajectory(self, trajectory: str | Trajectory) -> str | Trajectory:
-        if isinstance(trajectory, Trajectory):
+    def _check_trajectory(self, trajectory: str | Reference) -> str | Reference:
+        if isinstance(trajectory, Reference):
             if trajectory.ndim != self.system.traj_ndim:
                 raise ValueError(
                     f"{self.vehicle.name} needs a {self.system.traj_ndim}-D trajectory, "
@@ -147,12 +147,12 @@ class _EnvCore:
             self._trajectory_spec = self._check_trajectory(options["trajectory"])
         return options
 
-    def _sample_episode(self, rng: np.random.Generator) -> tuple[Trajectory, FloatArray, Any]:
+    def _sample_episode(self, rng: np.random.Generator) -> tuple[Reference, FloatArray, Any]:
         """Draws one episode's trajectory, initial-state offset and parameters from rng."""
         spec = self._trajectory_spec
         traj = (
             spec
-            if isinstance(spec, Trajectory)
+            if isinstance(spec, Reference)
             else make_trajectory(spec, ndim=self.system.traj_ndim, rng=rng)
         )
         offset = np.zeros(self.system.n_states)
@@ -201,7 +201,7 @@ class QuadrotorEnv(_EnvCore, gym.Env):
 
     Args:
         trajectory: Reference name (``hover``, ``step``, ``sine``, ``diamond``, ``figure8``,
-            ``random``; ``A``/``B``/``C`` alias the paper cases) or a Trajectory object.
+            ``random``; ``A``/``B``/``C`` alias the paper cases) or a Reference object.
         dt: Control period [s]; the action is held over it (zero-order hold).
         substeps: RK4 substeps per control period.
         duration: Horizon [s] over which references are tabulated (the time limit comes
@@ -222,7 +222,7 @@ class QuadrotorEnv(_EnvCore, gym.Env):
 
     def __init__(
         self,
-        trajectory: str | Trajectory = "hover",
+        trajectory: str | Reference = "hover",
         dt: float = 0.01,
         substeps: int = 1,
         duration: float = 10.0,
@@ -356,7 +356,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self,
         num_envs: int = 1,
         max_episode_steps: int | None = None,
-        trajectory: str | Trajectory = "hover",
+        trajectory: str | Reference = "hover",
         dt: float = 0.01,
         substeps: int = 1,
         duration: float = 10.0,
@@ -387,7 +387,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self._k = np.zeros(self.num_envs, dtype=np.int64)
         self._needs_reset = np.zeros(self.num_envs, dtype=bool)
         self._rngs = [np.random.default_rng() for _ in range(self.num_envs)]
-        self._trajs: list[Trajectory] = []
+        self._trajs: list[Reference] = []
         self._params_list: list[Any] = [self.params] * self.num_envs
 
     def reset(
@@ -521,10 +521,10 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         return self._renderer.draw(self._states[0], self._states[:1], refs, self._k[0] * self.dt)
 
 
-class _ListTrajectory(Trajectory):
+class _ListTrajectory(Reference):
     """Per-member trajectories of mixed kinds, evaluated one by one."""
 
-    def __init__(self, trajs: list[Trajectory]) -> None:
+    def __init__(self, trajs: list[Reference]) -> None:
         self.trajs, self.ndim = trajs, trajs[0].ndim
 
     def __call__(self, t: FloatArray | float) -> FloatArray:

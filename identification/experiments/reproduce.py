@@ -16,15 +16,19 @@ from typing import Any
 import numpy as np
 
 from identification.data import Trajectory, read_csv, write_trajectory_csv
-from identification.evaluate import compare_closed_loop, normalized_score, validation_references
+from identification.experiments.evaluate import (
+    compare_closed_loop,
+    normalized_score,
+    validation_references,
+)
+from identification.experiments.paper import PAPER_LAMBDA, fit_paper
+from identification.experiments.plots import plot_abs_error, plot_comparison, plot_curves
+from identification.experiments.truth import Comparison, compare_coefficients, planar_truth
 from identification.fit import DEFAULT_LAMBDAS, FitConfig, ScanResult, choose_best, fit, scan_lambda
 from identification.libraries import planar_library
 from identification.model import IdentifiedModel
-from identification.paper import PAPER_LAMBDA, fit_paper
-from identification.plots import plot_abs_error, plot_comparison, plot_curves
-from identification.truth import Comparison, compare_coefficients, planar_truth
 from quad_envs.dynamics import PLANAR_STATE_NAMES
-from quad_envs.io import atomic_write_text, write_json
+from quad_envs.fileio import atomic_write_text, write_json
 from quad_envs.simulate import simulate_case
 
 PAPER_GRID = tuple(np.round(np.arange(0, 1.0001, 0.05), 2))

@@ -34,7 +34,7 @@ def simulate(
     duration: Annotated[float, typer.Option(help="final time [s]")] = 10.0,
 ) -> None:
     """Flies a reference under the PD controller and writes t, states, inputs, references."""
-    from quad_envs.io import write_csv
+    from quad_envs.fileio import write_csv
     from quad_envs.simulate import simulate_case
 
     try:
@@ -53,7 +53,7 @@ def bench_envs_cmd(
 ) -> None:
     """Steps/s of PlanarQuad-v0 and Quad6DOF-v0 (single and vector) against Pendulum-v1."""
     import quad_envs
-    from quad_envs.bench import bench_envs
+    from quad_sindy.bench import bench_envs
 
     rows = bench_envs(quad_envs.ENV_IDS, num_envs, seconds)
     typer.echo(f"{'env':<16} {'mode':<14} {'steps/s':>12} {'x Pendulum-v1':>14}")
@@ -96,10 +96,14 @@ def identify(
 ) -> None:
     """Identifies a SINDy-with-control model from data and prints its equations."""
     from identification.data import load_data
-    from identification.evaluate import compare_closed_loop, normalized_score, validation_references
+    from identification.experiments.evaluate import (
+        compare_closed_loop,
+        normalized_score,
+        validation_references,
+    )
+    from identification.experiments.paper import PAPER_LAMBDA, fit_paper
     from identification.fit import FitConfig, fit, scan_lambda
     from identification.libraries import default_library
-    from identification.paper import PAPER_LAMBDA, fit_paper
 
     try:
         cols = [c.strip() for c in columns.split(",")] if columns else None
@@ -136,7 +140,7 @@ def reproduce(
     authors_csv: Annotated[Path | None, typer.Option(help="the authors' case C file")] = None,
 ) -> None:
     """The paper end to end: simulate, identify (ours and the paper's method), test, report."""
-    from identification.reproduce import run
+    from identification.experiments.reproduce import run
 
     run(out, authors_csv=authors_csv or _shared_reference(), echo=typer.echo)
 
@@ -147,7 +151,7 @@ def study(
     out: Annotated[Path, typer.Option(help="output folder")] = Path("out/study"),
 ) -> None:
     """Coefficient error and support against lambda, dt, data size or noise (CSV + PNG)."""
-    from identification.study import run_study
+    from identification.experiments.study import run_study
 
     path = run_study(name.value, out)
     typer.echo(f"wrote {path} and {path.with_suffix('.png')}")
@@ -158,7 +162,7 @@ def bench_surrogate_cmd(
     seconds: Annotated[float, typer.Option(help="minimum timing per measurement [s]")] = 2.0,
 ) -> None:
     """Steps/s of a SINDy surrogate (compiled) against the truth and pysindy's predict."""
-    from quad_envs.bench import bench_surrogate
+    from quad_sindy.bench import bench_surrogate
 
     typer.echo(f"{'env':<36} {'steps/s':>10} {'ratio':>8}")
     for row in bench_surrogate(seconds):
@@ -185,7 +189,7 @@ def compare(
 ) -> None:
     """The same policy and initial state in the ground truth and in the surrogate."""
     from agents.policies import make_policy
-    from identification.compare import compare_envs, write_comparison
+    from identification.experiments.compare import compare_envs, write_comparison
     from identification.model import load_model
 
     try:

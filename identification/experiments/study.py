@@ -19,14 +19,14 @@ from typing import Any
 import numpy as np
 
 from identification.data import Trajectory
+from identification.experiments.paper import fit_paper
+from identification.experiments.plots import plot_curves
+from identification.experiments.truth import compare_coefficients, planar_truth
 from identification.fit import DEFAULT_LAMBDAS, FitConfig, fit
 from identification.libraries import planar_library
-from identification.paper import fit_paper
-from identification.plots import plot_curves
-from identification.truth import compare_coefficients, planar_truth
 from quad_envs.controllers import PlanarPD
 from quad_envs.dynamics import PLANAR_STATE_NAMES
-from quad_envs.io import atomic_write_text
+from quad_envs.fileio import atomic_write_text
 from quad_envs.simulate import planar_system, simulate_closed_loop
 from quad_envs.trajectories import RandomWaypoints, make_trajectory
 

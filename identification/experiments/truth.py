@@ -8,7 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from identification.features import Term, parse_term, term_name
+from identification.libraries import default_library
+from identification.model import IdentifiedModel
 from quad_envs.params import PAPER_6DOF, PAPER_PLANAR, PlanarQuadParams, Quad6DOFParams
+from quad_envs.simulate import get_system
 
 
 def planar_truth(params: PlanarQuadParams = PAPER_PLANAR) -> dict[str, dict[str, float]]:
@@ -147,3 +150,13 @@ def compare_coefficients(
         for i, j in zip(*np.nonzero(~is_true & (found_u != 0)), strict=True)
     ]
     return Comparison(true_u, found_u, rel, int(is_true.sum()), missed, spurious)
+
+
+def model_from_truth(system: str, feature_names: Sequence[str] | None = None) -> IdentifiedModel:
+    """The ground truth written as a model in a library (default: the system's library)."""
+    sys_ = get_system(system)
+    names = list(feature_names) if feature_names is not None else default_library(system)
+    xi = truth_matrix(truth_for(system), sys_.state_names, names)
+    return IdentifiedModel(
+        names, xi, sys_.state_names, sys_.input_names, system, {"method": "truth"}
+    )

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from identification.model import IdentifiedModel
 from quad_envs.simulate import ClosedLoopRun, get_system, simulate_closed_loop
-from quad_envs.trajectories import Trajectory as Reference
-from quad_envs.trajectories import make_trajectory
+from quad_envs.trajectories import Reference, make_trajectory
 
 
 def rmse_per_state(a: np.ndarray, b: np.ndarray, names: Sequence[str]) -> dict[str, float]:
@@ -37,6 +36,21 @@ class ClosedLoopComparison:
         return np.abs(self.model.states - self.truth.states)
 
 
+def simulate_model_closed_loop(
+    model: IdentifiedModel,
+    reference: Reference,
+    controller: Callable | None = None,
+    dt: float = 0.01,
+    duration: float = 10.0,
+    x0: np.ndarray | None = None,
+) -> ClosedLoopRun:
+    """Flies the model under a controller (its system's PD by default), with saturation."""
+    if model.system is None:
+        raise ValueError("closed-loop simulation needs a model of a known system (system=...)")
+    system = replace(get_system(model.system), rhs=model.rhs)
+    return simulate_closed_loop(system, reference, controller, dt, duration, x0)
+
+
 def compare_closed_loop(
     model: IdentifiedModel, reference: Reference | str, dt: float = 0.01, duration: float = 10.0
 ) -> ClosedLoopComparison:
@@ -48,7 +62,7 @@ def compare_closed_loop(
         reference = make_trajectory(reference, ndim=system.traj_ndim, rng=np.random.default_rng(0))
     truth = simulate_closed_loop(system, reference, dt=dt, duration=duration)
     with np.errstate(all="ignore"):
-        flown = model.simulate_closed_loop(reference, dt=dt, duration=duration)
+        flown = simulate_model_closed_loop(model, reference, dt=dt, duration=duration)
     return ClosedLoopComparison(
         truth, flown, rmse_per_state(flown.states, truth.states, system.state_names)
     )

@@ -1,5 +1,5 @@
 """``python -m quad_envs``: the quad-sindy command line."""
 
-from quad_envs.cli import main
+from quad_sindy.cli import main
 
 main()

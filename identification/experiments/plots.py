@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.evaluate import ClosedLoopComparison
+from identification.experiments.evaluate import ClosedLoopComparison
 
 
 def _plt():

@@ -11,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 
 import quad_envs  # noqa: F401 (registers the ids)
-from identification.evaluate import rmse_per_state
+from identification.experiments.evaluate import rmse_per_state
 from identification.model import IdentifiedModel
 from identification.surrogate import make_surrogate
 
@@ -94,8 +94,8 @@ def compare_envs(
 
 def write_comparison(comp: EnvComparison, out: str | Path, title: str = "") -> dict[str, Any]:
     """Absolute-error plot, states CSV and summary JSON into ``out``."""
-    from identification.plots import _save, state_grid
-    from quad_envs.io import write_csv, write_json
+    from identification.experiments.plots import _save, state_grid
+    from quad_envs.fileio import write_csv, write_json
 
     out = Path(out)
     names = comp.state_names

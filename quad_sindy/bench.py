@@ -94,8 +94,8 @@ def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
     import pysindy as ps
 
     from identification.data import Trajectory
+    from identification.experiments.truth import model_from_truth
     from identification.libraries import paper_planar_library
-    from identification.model import model_from_truth
     from quad_envs.simulate import simulate_case
 
     model = model_from_truth("planar")

@@ -1,0 +1,138 @@
+"""Data from environments: rollouts of any policy in any registered env, recorded as trajectories.
+
+The recorded input is the one the vehicle *applied* (``info["action"]``, after saturation);
+what the policy commanded is kept in ``Trajectory.meta["commanded"]``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import quad_envs  # noqa: F401 (registers the ids)
+from identification.data import Trajectory
+
+Policy = Callable[[np.ndarray, dict[str, Any]], np.ndarray]
+"""A policy maps (observation, info) to an action of the env's action space."""
+
+
+def collect_rollouts(
+    env_id: str,
+    policy: Policy,
+    episodes: int = 1,
+    seed: int = 0,
+    action_noise: float = 0.0,
+    max_steps: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+    reset_options: Callable[[int, np.random.Generator], dict[str, Any]] | None = None,
+) -> list[Trajectory]:
+    """Runs a policy in a registered env and records states and *applied* inputs.
+
+    Args:
+        env_id: Any registered id (``PlanarQuad-v0``, a surrogate, ...).
+        policy: (obs, info) -> action.
+        episodes: Number of episodes; episode i is reset with seed + i.
+        seed: Base seed.
+        action_noise: Gaussian noise on the action, as a fraction of the action box half-width.
+        max_steps: Cap on steps per episode (the env's time limit otherwise).
+        env_kwargs: Passed to ``gym.make``.
+        reset_options: (episode, rng) -> options for that episode's ``reset``.
+
+    Returns:
+        One trajectory per episode (at least 3 samples each).
+    """
+    try:
+        env = gym.make(env_id, **(env_kwargs or {}))
+    except gym.error.Error as exc:
+        raise ValueError(f"unknown or unusable env id {env_id!r}: {exc}") from None
+    base = env.unwrapped
+    rng = np.random.default_rng(seed)
+    space = env.action_space
+    half = 0.5 * (space.high - space.low)
+    trajs = []
+    for ep in range(episodes):
+        options = reset_options(ep, rng) if reset_options else None
+        obs, info = env.reset(seed=seed + ep, options=options)
+        ts, xs, us, refs = [], [], [], []
+        steps = 0
+        while True:
+            action = np.asarray(policy(obs, info), dtype=np.float64)
+            if action_noise > 0:
+                action = np.clip(action + action_noise * half * rng.standard_normal(half.shape),
+                                 space.low, space.high)  # fmt: skip
+            ts.append(info["time"])
+            xs.append(info["state"])
+            refs.append(info["reference"])
+            obs, _, terminated, truncated, info = env.step(action.astype(space.dtype))
+            us.append(info["action"])
+            steps += 1
+            if terminated or truncated or (max_steps is not None and steps >= max_steps):
+                break
+        if len(us) >= 3:
+            sys_ = base.system
+            trajs.append(
+                Trajectory(
+                    np.array(ts),
+                    np.array(xs),
+                    np.array(us),
+                    sys_.state_names,
+                    sys_.input_names,
+                    refs=np.array(refs),
+                    meta={"env": env_id, "seed": seed + ep},
+                )  # fmt: skip
+            )
+    env.close()
+    return trajs
+
+
+def excitation_rollouts(
+    env_id: str = "Quad6DOF-v0",
+    episodes: int = 4,
+    seed: int = 0,
+    steps: int = 1000,
+    noise: float = 0.15,
+) -> list[Trajectory]:
+    """PD tracking of random waypoints plus exploration noise: rich identification data.
+
+    In 6-DOF the references sweep the yaw (amplitude 1.5 rad) so that every trig factor of
+    the library varies; without it cos(psi) f and f are collinear.
+
+    Args:
+        env_id: ``PlanarQuad-v0``, ``Quad6DOF-v0`` or a surrogate of them.
+        episodes: Number of flights.
+        seed: Seed of waypoints, noise and resets.
+        steps: Steps per flight.
+        noise: Action noise as a fraction of the action box half-width.
+
+    Returns:
+        The recorded trajectories (applied inputs).
+    """
+    from quad_envs.controllers import PlanarPD, Quad6DOFPD
+    from quad_envs.trajectories import RandomWaypoints
+
+    planar = env_id.startswith("PlanarQuad")
+    pd = PlanarPD() if planar else Quad6DOFPD()
+    ndim = 2 if planar else 3
+
+    def options(ep: int, rng: np.random.Generator) -> dict[str, Any]:
+        low = (-1.5, 0.5) if planar else (-1.5, -1.5, 0.5)
+        high = (1.5, 2.0) if planar else (1.5, 1.5, 2.0)
+        ref = RandomWaypoints.sample(
+            rng, ndim=ndim, num_waypoints=int(steps * 0.01 / 1.5) + 2, low=low, high=high,
+            segment_time=1.5, yaw_amplitude=0.0 if planar else 1.5, yaw_period=4.0 + ep,
+        )  # fmt: skip
+        return {"trajectory": ref}
+
+    return collect_rollouts(
+        env_id,
+        lambda obs, info: pd(info["state"], info["reference"]),
+        episodes=episodes,
+        seed=seed,
+        action_noise=noise,
+        max_steps=steps,
+        env_kwargs={"duration": steps * 0.01 + 1.0},
+        reset_options=options,
+    )
