@@ -1,0 +1,201 @@
+"""Real-flight logs, the rotorcraft library and the nano-drone benchmark protocol.
+
+Synthetic flights are made by running the log conversion backwards; real-data tests use short
+slices of the shared flights and skip where ``../shared`` is absent.
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from identification.data import Trajectory
+from identification.logs import (
+    NANODRONE_COLUMNS,
+    LogColumns,
+    estimate_quaternion_offset,
+    flight_to_trajectory,
+    geodesic_angle,
+    quaternion_to_rotation,
+    read_flight,
+    read_log,
+    read_table,
+    rotation_to_euler_zxy,
+    rotation_to_quaternion,
+    trajectory_to_table,
+)
+from quad_envs.dynamics import QUAD6DOF_STATE_NAMES, rotation_zxy
+
+SHARED = Path(__file__).resolve().parents[2] / "shared"
+FLIGHTS = SHARED / "data" / "nanodrone"
+needs_flights = pytest.mark.skipif(
+    not (FLIGHTS / "square_20251017_run1.parquet").exists(),
+    reason="../shared/data/nanodrone is not present",
+)
+
+
+def synthetic_flight(n: int = 400, seed: int = 0) -> Trajectory:
+    """A smooth 6-DOF flight (large angles, yaw past pi) with motor speeds in rad/s."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    phase = rng.uniform(0, 2 * np.pi, size=12)
+    freq = rng.uniform(0.3, 1.5, size=12)
+    wave = np.sin(freq * t[:, None] * 2 * np.pi + phase)
+    x = np.empty((n, 12))
+    x[:, 0:3] = wave[:, 0:3]
+    x[:, 3] = 1.2 * wave[:, 3]  # roll up to ~70 degrees
+    x[:, 4] = 1.0 * wave[:, 4]
+    x[:, 5] = 2.0 * t + 2.5  # yaw crosses pi: unwrapping is exercised
+    x[:, 6:9] = 2.0 * wave[:, 6:9]
+    x[:, 9:12] = 5.0 * wave[:, 9:12]
+    omega = 1800 + 400 * np.sin(3 * t[:, None] + np.arange(4))
+    names = ("omega1", "omega2", "omega3", "omega4")
+    return Trajectory(t, x, omega, QUAD6DOF_STATE_NAMES, names)
+
+
+# -- rotations -------------------------------------------------------------------------
+def test_quaternion_rotation_round_trip_matches_zxy_angles():
+    rng = np.random.default_rng(1)
+    phi, theta, psi = rng.uniform(-1.4, 1.4, 500), rng.uniform(-3, 3, 500), rng.uniform(-3, 3, 500)
+    rot = rotation_zxy(phi, theta, psi)
+    quat = rotation_to_quaternion(rot)
+    np.testing.assert_allclose(np.linalg.norm(quat, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(quaternion_to_rotation(quat), rot, atol=1e-12)
+    back = rotation_to_euler_zxy(rot)
+    np.testing.assert_allclose(back[0], phi, atol=1e-10)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (back[1] - theta))), 0.0, atol=1e-10)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (back[2] - psi))), 0.0, atol=1e-10)
+    assert geodesic_angle(rot, rot).max() < 1e-6
+    # A known rotation: 0.3 rad about body z is a geodesic angle of 0.3.
+    assert geodesic_angle(rot[0], rot[0] @ rotation_zxy(0.0, 0.0, 0.3)) == pytest.approx(0.3)
+
+
+def test_quaternion_offset_recovered():
+    rng = np.random.default_rng(2)
+    quat = rotation_to_quaternion(rotation_zxy(*rng.uniform(-1, 1, (3, 300))))
+    offset = np.array([-0.002, 0.001, -0.003, 0.045])
+    np.testing.assert_allclose(estimate_quaternion_offset(quat - offset), -offset, atol=1e-9)
+
+
+# -- synthetic logs: the conversion run backwards ---------------------------------------
+def test_synthetic_log_round_trip_with_offset():
+    truth = synthetic_flight()
+    table = trajectory_to_table(truth, quaternion_offset=(-0.002, 0.001, -0.003, 0.045))
+    norms = np.linalg.norm([table[c] for c in ("qx", "qy", "qz", "qw")], axis=0)
+    assert np.abs(norms - 1.0).max() > 0.02
+    traj = flight_to_trajectory(table)
+    np.testing.assert_allclose(traj.x, truth.x, atol=1e-8)
+    np.testing.assert_allclose(traj.u, truth.u, rtol=1e-12)
+    assert traj.input_names == ("omega1", "omega2", "omega3", "omega4")
+    cleaning = traj.meta["cleaning"]
+    assert cleaning["quaternion_norm_error"] < 1e-9
+    assert cleaning["stale_state_rows"] == 0 and sum(cleaning["motor_spikes"]) == 0
+    # Plain normalisation (no offset repair) would be wrong by centiradians.
+    quat = np.column_stack([table[c] for c in ("qx", "qy", "qz", "qw")])
+    plain = quaternion_to_rotation(quat / np.linalg.norm(quat, axis=1, keepdims=True))
+    assert geodesic_angle(plain, rotation_zxy(*truth.x[:, 3:6].T)).max() > 0.01
+
+
+def test_synthetic_log_spikes_and_stale_rows_repaired_and_counted():
+    truth = synthetic_flight()
+    table = trajectory_to_table(truth)
+    state_cols = [c for c in NANODRONE_COLUMNS.required() if c not in NANODRONE_COLUMNS.motors]
+    state_cols.remove("t")
+    stale = [50, 51, 200, 333]
+    for k in stale:
+        for c in state_cols + list(NANODRONE_COLUMNS.motors):
+            table[c][k] = table[c][k - 1]
+    table["m3_erpm"][120] = 6e6
+    table["m1_erpm"][121] = -5.0
+    traj = flight_to_trajectory(table)
+    cleaning = traj.meta["cleaning"]
+    assert cleaning["stale_state_rows"] == len(stale)
+    assert cleaning["stale_motor_rows"] == len(stale)
+    assert cleaning["motor_spikes"] == [1, 0, 1, 0]
+    # Untouched rows are exact; interpolation over one or two 10 ms samples of smooth
+    # signals is close to the truth.
+    touched = np.zeros(len(truth), dtype=bool)
+    touched[stale + [120, 121]] = True
+    np.testing.assert_allclose(traj.x[~touched], truth.x[~touched], atol=1e-8)
+    np.testing.assert_allclose(traj.x, truth.x, atol=0.03)
+    np.testing.assert_allclose(traj.u, truth.u, atol=2.0)
+    # Without the repair the stale rows stay (counted, not changed); the spikes are always fixed.
+    raw = flight_to_trajectory(table, repair_stale=False)
+    assert raw.meta["cleaning"]["stale_state_rows"] == len(stale)
+    np.testing.assert_array_equal(raw.x[51], raw.x[50])
+    assert raw.u.max() < 3000
+
+
+def test_generic_reader_csv_with_mapping(tmp_path):
+    truth = synthetic_flight(n=120)
+    cols = LogColumns.from_mapping(
+        {
+            "time": "time",
+            "position": "px,py,pz",
+            "velocity": "u,v,w",
+            "velocity_frame": "body",
+            "euler_zxy": "roll,pitch,yaw",
+            "rates": "p,q,r",
+            "motors": "rpm1,rpm2,rpm3,rpm4",
+            "motor_unit": "rpm",
+        }
+    )
+    assert cols.quaternion is None
+    table = trajectory_to_table(truth, cols)
+    path = tmp_path / "flight.csv"
+    names = list(table)
+    rows = np.column_stack([table[c] for c in names])
+    np.savetxt(path, rows, delimiter=",", header=",".join(names), comments="")
+    mapping = {"time": "time", "position": ["px", "py", "pz"], "velocity": "u,v,w"}
+    mapping |= {"velocity_frame": "body", "euler_zxy": "roll,pitch,yaw", "rates": "p,q,r"}
+    mapping |= {"motors": "rpm1,rpm2,rpm3,rpm4", "motor_unit": "rpm"}
+    traj = read_log(path, mapping)
+    np.testing.assert_allclose(traj.x, truth.x, atol=1e-9)
+    np.testing.assert_allclose(traj.u, truth.u, rtol=1e-9)
+
+
+def test_bad_inputs_raise_one_line_errors(tmp_path):
+    with pytest.raises(ValueError, match="unknown column mapping key"):
+        LogColumns.from_mapping({"motor": "a"})
+    with pytest.raises(ValueError, match="motor_unit"):
+        LogColumns(motor_unit="hz")
+    with pytest.raises(ValueError, match="exactly one attitude"):
+        LogColumns(euler_zxy=("a", "b", "c"))
+    table = trajectory_to_table(synthetic_flight(n=50))
+    del table["qw"]
+    with pytest.raises(ValueError, match=r"missing column\(s\) \['qw'\]"):
+        flight_to_trajectory(table)
+    with pytest.raises(FileNotFoundError):
+        read_table(tmp_path / "none.parquet")
+    (tmp_path / "x.txt").write_text("1,2\n")
+    with pytest.raises(ValueError, match="unsupported log format"):
+        read_table(tmp_path / "x.txt")
+
+
+# -- real flights ----------------------------------------------------------------------
+@needs_flights
+def test_real_flight_conversion_matches_repaired_quaternion():
+    path = FLIGHTS / "square_20251017_run2.parquet"
+    traj = read_flight(path)
+    table = read_table(path, ["qx", "qy", "qz", "qw"])
+    quat = np.column_stack([table[c] for c in ("qx", "qy", "qz", "qw")])
+    cleaning = traj.meta["cleaning"]
+    assert cleaning["quaternion_norm_range"][1] > 1.03  # the README's offset is there
+    assert cleaning["quaternion_norm_error"] < 1e-5  # and a constant offset explains it
+    assert cleaning["stale_state_rows"] > 0
+    repaired = quat - np.asarray(cleaning["quaternion_offset"])
+    repaired /= np.linalg.norm(repaired, axis=1, keepdims=True)
+    fresh = np.ones(len(traj), dtype=bool)
+    fresh[1:] = np.any(np.diff(quat, axis=0) != 0, axis=1)
+    rebuilt = rotation_zxy(*traj.x[fresh, 3:6].T)
+    assert geodesic_angle(rebuilt, quaternion_to_rotation(repaired[fresh])).max() < 1e-6
+    # Motor speeds in rad/s: hover needs Kt sum(Omega^2) ~ m g (README: 1.01 to 1.10).
+    ratio = 3.72e-8 * np.mean(np.sum(traj.u**2, axis=1)) / (0.045 * 9.81)
+    assert 0.95 < ratio < 1.15
+
+
+@needs_flights
+def test_real_flight_spikes_removed():
+    traj = read_flight(FLIGHTS / "multisine_20251017_run1.parquet")
+    assert sum(traj.meta["cleaning"]["motor_spikes"]) == 2
+    assert traj.u.max() < 3000 and traj.u.min() > 300
