@@ -12,7 +12,6 @@ import gymnasium as gym
 import numpy as np
 
 import quad_envs  # noqa: F401 (registers the ids)
-from quad_envs.controllers import PlanarPD, Quad6DOFPD
 
 POLICIES = ("pd", "random", "ou")
 
@@ -25,20 +24,12 @@ class PDPolicy:
     """
 
     def __init__(self, env: gym.Env) -> None:
-        base = env.unwrapped
-        self.controller = (
-            PlanarPD(base.params) if base.vehicle.name == "planar" else Quad6DOFPD(base.params)
-        )
-        self.normalized = base.normalize_actions
-        self.center, self.half = base._u_center, base._u_half
-        self.dtype = env.action_space.dtype
+        self.env = env.unwrapped
+        self.controller = self.env.vehicle.default_controller()
 
     def __call__(self, obs: np.ndarray, info: dict[str, Any]) -> np.ndarray:
         """The commanded input for the true state and reference in ``info``."""
-        u = self.controller(info["state"], info["reference"])
-        if self.normalized:
-            u = np.clip((u - self.center) / self.half, -1.0, 1.0)
-        return u.astype(self.dtype)
+        return self.env.action_from_input(self.controller(info["state"], info["reference"]))
 
 
 class UniformRandomPolicy:

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from quad_envs.fileio import atomic_write_bytes, write_csv
-from quad_envs.simulate import ClosedLoopRun, get_system
+from quad_envs.simulate import ClosedLoopRun
+from quad_envs.vehicles import get_vehicle
 
 
 @dataclass
@@ -60,7 +61,7 @@ class Trajectory:
     def from_run(cls, run: ClosedLoopRun, inputs: str = "applied", **meta: Any) -> Trajectory:
         """From a closed-loop simulation (applied inputs by default)."""
         u = run.applied if inputs == "applied" else run.commanded
-        names = (run.system.state_names, run.system.input_names)
+        names = (run.vehicle.state_names, run.vehicle.input_names)
         return cls(run.t, run.states, u, *names, refs=run.refs, meta=meta)
 
 
@@ -94,11 +95,11 @@ def validate(traj: Trajectory) -> None:
 def _split_columns(
     columns: Sequence[str], system: str
 ) -> tuple[int, list[int], list[int], list[str], list[str]]:
-    sys_ = get_system(system)
+    sys_ = get_vehicle(system)
     known_states, known_inputs = set(sys_.state_names), set(sys_.input_names)
     if "t" not in columns:
         raise ValueError(f"columns must include 't', got {list(columns)}")
-    ignored = set(sys_.ref_names) | {"_"}
+    ignored = set(sys_.ref_names) | {f"{name}_cmd" for name in sys_.input_names} | {"_"}
     unknown = [c for c in columns if c not in known_states | known_inputs | ignored | {"t"}]
     if unknown:
         valid = ["t", *sys_.state_names, *sys_.input_names, "_", *sys_.ref_names]

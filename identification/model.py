@@ -13,7 +13,7 @@ import numpy as np
 from identification.features import compile_features, compile_rhs, parse_term, term_latex, term_name
 from quad_envs.fileio import write_json
 from quad_envs.integrators import rk4_step
-from quad_envs.simulate import get_system
+from quad_envs.vehicles import get_vehicle
 
 SCHEMA = "quad-sindy/model"
 SCHEMA_VERSION = 1
@@ -56,7 +56,7 @@ class IdentifiedModel:
         for name in self.feature_names:
             parse_term(name, variables)  # raises on unknown variables or bad syntax
         if self.system is not None:
-            sys_ = get_system(self.system)
+            sys_ = get_vehicle(self.system)
             if (sys_.state_names, sys_.input_names) != (self.state_names, self.input_names):
                 raise ValueError(
                     f"model variables {self.state_names} / {self.input_names} do not match the "

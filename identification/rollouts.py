@@ -14,6 +14,7 @@ import numpy as np
 
 import quad_envs  # noqa: F401 (registers the ids)
 from identification.data import Trajectory
+from quad_envs.trajectories import RandomWaypoints
 
 Policy = Callable[[np.ndarray, dict[str, Any]], np.ndarray]
 """A policy maps (observation, info) to an action of the env's action space."""
@@ -56,7 +57,7 @@ def collect_rollouts(
     for ep in range(episodes):
         options = reset_options(ep, rng) if reset_options else None
         obs, info = env.reset(seed=seed + ep, options=options)
-        ts, xs, us, refs = [], [], [], []
+        ts, xs, us, commanded, refs = [], [], [], [], []
         steps = 0
         while True:
             action = np.asarray(policy(obs, info), dtype=np.float64)
@@ -68,20 +69,22 @@ def collect_rollouts(
             refs.append(info["reference"])
             obs, _, terminated, truncated, info = env.step(action.astype(space.dtype))
             us.append(info["action"])
+            commanded.append(info.get("commanded", info["action"]))
             steps += 1
             if terminated or truncated or (max_steps is not None and steps >= max_steps):
                 break
         if len(us) >= 3:
-            sys_ = base.system
+            vehicle = base.vehicle
+            meta = {"env": env_id, "seed": seed + ep, "commanded": np.array(commanded)}
             trajs.append(
                 Trajectory(
                     np.array(ts),
                     np.array(xs),
                     np.array(us),
-                    sys_.state_names,
-                    sys_.input_names,
+                    vehicle.state_names,
+                    vehicle.input_names,
                     refs=np.array(refs),
-                    meta={"env": env_id, "seed": seed + ep},
+                    meta=meta,
                 )  # fmt: skip
             )
     env.close()
@@ -94,8 +97,9 @@ def excitation_rollouts(
     seed: int = 0,
     steps: int = 1000,
     noise: float = 0.15,
+    env_kwargs: dict[str, Any] | None = None,
 ) -> list[Trajectory]:
-    """PD tracking of random waypoints plus exploration noise: rich identification data.
+    """The vehicle's own controller tracking random waypoints plus exploration noise.
 
     In 6-DOF the references sweep the yaw (amplitude 1.5 rad) so that every trig factor of
     the library varies; without it cos(psi) f and f are collinear.
@@ -106,16 +110,18 @@ def excitation_rollouts(
         seed: Seed of waypoints, noise and resets.
         steps: Steps per flight.
         noise: Action noise as a fraction of the action box half-width.
+        env_kwargs: Passed to ``gym.make`` (``params=`` flies another vehicle).
 
     Returns:
         The recorded trajectories (applied inputs).
     """
-    from quad_envs.controllers import PlanarPD, Quad6DOFPD
-    from quad_envs.trajectories import RandomWaypoints
-
-    planar = env_id.startswith("PlanarQuad")
-    pd = PlanarPD() if planar else Quad6DOFPD()
-    ndim = 2 if planar else 3
+    env_kwargs = {"duration": steps * 0.01 + 1.0, **(env_kwargs or {})}
+    probe = gym.make(env_id, **env_kwargs)
+    vehicle = probe.unwrapped.vehicle
+    probe.close()
+    pd = vehicle.default_controller()
+    planar = vehicle.ndim == 2
+    ndim = vehicle.ndim
 
     def options(ep: int, rng: np.random.Generator) -> dict[str, Any]:
         low = (-1.5, 0.5) if planar else (-1.5, -1.5, 0.5)
@@ -133,6 +139,6 @@ def excitation_rollouts(
         seed=seed,
         action_noise=noise,
         max_steps=steps,
-        env_kwargs={"duration": steps * 0.01 + 1.0},
+        env_kwargs=env_kwargs,
         reset_options=options,
     )

@@ -38,11 +38,11 @@ def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: b
         raise ValueError("a surrogate env needs model= (a model object or a model JSON path)")
     if not isinstance(model, IdentifiedModel):
         model = load_model(model)
-    system = cls.vehicle.make_system(cls.vehicle.default_params)
-    if (model.state_names, model.input_names) != (system.state_names, system.input_names):
+    vehicle = cls.vehicle
+    if (model.state_names, model.input_names) != (vehicle.state_names, vehicle.input_names):
         raise ValueError(
             f"model variables {model.state_names} / {model.input_names} do not match {base_id}'s "
-            f"{system.state_names} / {system.input_names}"
+            f"{vehicle.state_names} / {vehicle.input_names}"
         )
     return model, cls
 

@@ -16,13 +16,14 @@ def plot_response(run: ClosedLoopRun, path: str | Path, title: str = "") -> Path
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    names = run.system.state_names
-    n = len(names) + run.system.n_inputs
-    ncols = 3 if run.system.name == "planar" else 4
+    veh = run.vehicle
+    names = veh.state_names
+    n = len(names) + veh.n_inputs
+    ncols = 3 if n <= 9 else 4
     nrows = int(np.ceil(n / ncols))
     fig, axes = plt.subplots(nrows, ncols, figsize=(4 * ncols, 2.6 * nrows), sharex=True)
     axes = axes.ravel()
-    ref_of = {"y": 0, "z": 1} if run.system.name == "planar" else {"x": 0, "y": 1, "z": 2}
+    ref_of = {name: i for i, name in enumerate(veh.position_names)}
     for i, name in enumerate(names):
         ax = axes[i]
         ax.plot(run.t, run.states[:, i], label=name)
@@ -30,9 +31,11 @@ def plot_response(run: ClosedLoopRun, path: str | Path, title: str = "") -> Path
             ax.plot(run.t, run.refs[:, ref_of[name]], "--", color="tab:gray", label="reference")
             ax.legend(fontsize=7)
         ax.set_ylabel(name)
-    for j, name in enumerate(run.system.input_names):
+    for j, name in enumerate(veh.input_names):
         ax = axes[len(names) + j]
-        ax.plot(run.t, run.commanded[:, j], color="tab:red")
+        ax.plot(run.t, run.commanded[:, j], color="tab:gray", lw=0.8, label="commanded")
+        ax.plot(run.t, run.applied[:, j], color="tab:red", label="applied")
+        ax.legend(fontsize=7)
         ax.set_ylabel(name)
     for ax in axes[n:]:
         ax.set_visible(False)

@@ -1,6 +1,7 @@
 """Matplotlib renderer: the vehicle, its reference and its trail.
 
-Planar: the y-z plane. 6-DOF: a side view (y-z) and a top view (x-y) of the same scene.
+The vehicle record says which projections to draw (planar: the y-z plane; 6-DOF: a side
+view y-z and a top view x-y) and where its rotors are.
 """
 
 from __future__ import annotations
@@ -9,28 +10,27 @@ from typing import Any
 
 import numpy as np
 
-from quad_envs.dynamics import rotation_zxy
 from quad_envs.types import FloatArray
+from quad_envs.vehicles import Vehicle
 
 
 class QuadRenderer:
     """Draws frames into an off-screen (``rgb_array``) or on-screen (``human``) figure.
 
     Args:
-        vehicle: ``planar`` or ``quad6dof``.
-        params: Vehicle parameters (the arm length sets the drawn size).
+        vehicle: The vehicle (its views, rotor positions and parameters).
         mode: ``rgb_array`` or ``human``.
     """
 
-    def __init__(self, vehicle: str, params: Any, mode: str) -> None:
+    def __init__(self, vehicle: Vehicle, mode: str) -> None:
         import matplotlib
 
         if mode == "rgb_array":
             matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
 
-        self.vehicle, self.params, self.mode, self._plt = vehicle, params, mode, plt
-        ncols = 1 if vehicle == "planar" else 2
+        self.vehicle, self.mode, self._plt = vehicle, mode, plt
+        ncols = len(vehicle.views)
         self.fig, axes = plt.subplots(1, ncols, figsize=(4.8 * ncols, 4.8), dpi=80)
         self.axes = np.atleast_1d(axes)
         if mode == "human":
@@ -55,25 +55,15 @@ class QuadRenderer:
 
     def draw(self, state: FloatArray, trail: FloatArray, refs: FloatArray, t: float) -> Any:
         """Draws one frame; returns an (H, W, 3) uint8 image in ``rgb_array`` mode."""
-        arm = self.params.arm_length * 3.0  # drawn 3x larger to be visible
-        if self.vehicle == "planar":
-            y, z, phi = state[0], state[1], state[2]
-            d = arm * np.array([np.cos(phi), np.sin(phi)])
-            body = np.array([[y, z] - d, [y, z] + d])
-            self._draw_view(self.axes[0], trail[:, :2], refs[:, :2], body, ("y [m]", "z [m]"))
-        else:
-            rot = rotation_zxy(state[3], state[4], state[5])
-            tips = (
-                state[0:3] + arm * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]]) @ rot.T
-            )
-            side = tips[[2, 3]][:, [1, 2]]
-            top = tips[[0, 1]][:, [0, 1]]
-            self._draw_view(
-                self.axes[0], trail[:, [1, 2]], refs[:, [1, 2]], side, ("y [m]", "z [m]")
-            )
-            self._draw_view(
-                self.axes[1], trail[:, [0, 1]], refs[:, [0, 1]], top, ("x [m]", "y [m]")
-            )
+        veh = self.vehicle
+        position = [veh.state_names.index(n) for n in veh.position_names]
+        centre = np.asarray(state)[position]
+        rotors = centre + 3.0 * (veh.rotor_points(state, veh.params) - centre)  # drawn 3x larger
+        path = trail[:, position]
+        for ax, view in zip(self.axes, veh.views, strict=True):
+            cols = list(view.axes)
+            arms = np.concatenate([[rotor, centre[cols]] for rotor in rotors[:, cols]])
+            self._draw_view(ax, path[:, cols], refs[:, cols], arms, view.labels)
         self.axes[0].set_title(f"t = {t:.2f} s")
         self.fig.canvas.draw()
         if self.mode == "human":

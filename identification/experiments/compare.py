@@ -85,8 +85,8 @@ def compare_envs(
         t=np.arange(len(truth)) * dt,
         truth=truth,
         surrogate=padded,
-        state_names=truth_env.unwrapped.system.state_names,
-        rmse=rmse_per_state(surrogate[:n], truth[:n], truth_env.unwrapped.system.state_names),
+        state_names=truth_env.unwrapped.vehicle.state_names,
+        rmse=rmse_per_state(surrogate[:n], truth[:n], truth_env.unwrapped.vehicle.state_names),
         divergence_time=float(parted[0] * dt) if parted.size else None,
         tolerance=tolerance,
     )

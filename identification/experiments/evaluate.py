@@ -8,8 +8,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from identification.model import IdentifiedModel
-from quad_envs.simulate import ClosedLoopRun, get_system, simulate_closed_loop
+from quad_envs.simulate import ClosedLoopRun, simulate_closed_loop
 from quad_envs.trajectories import Reference, make_trajectory
+from quad_envs.vehicles import get_vehicle
 
 
 def rmse_per_state(a: np.ndarray, b: np.ndarray, names: Sequence[str]) -> dict[str, float]:
@@ -47,8 +48,8 @@ def simulate_model_closed_loop(
     """Flies the model under a controller (its system's PD by default), with saturation."""
     if model.system is None:
         raise ValueError("closed-loop simulation needs a model of a known system (system=...)")
-    system = replace(get_system(model.system), rhs=model.rhs)
-    return simulate_closed_loop(system, reference, controller, dt, duration, x0)
+    vehicle = replace(get_vehicle(model.system), dynamics=lambda x, u, _params: model.rhs(x, u))
+    return simulate_closed_loop(vehicle, reference, controller, dt, duration, x0)
 
 
 def compare_closed_loop(
@@ -57,14 +58,14 @@ def compare_closed_loop(
     """Flies ``reference`` with the system's PD on the truth and on the model (the paper's test)."""
     if model.system is None:
         raise ValueError("closed-loop comparison needs a model of a known system")
-    system = get_system(model.system)
+    vehicle = get_vehicle(model.system)
     if isinstance(reference, str):
-        reference = make_trajectory(reference, ndim=system.traj_ndim, rng=np.random.default_rng(0))
-    truth = simulate_closed_loop(system, reference, dt=dt, duration=duration)
+        reference = make_trajectory(reference, ndim=vehicle.ndim, rng=np.random.default_rng(0))
+    truth = simulate_closed_loop(vehicle, reference, dt=dt, duration=duration)
     with np.errstate(all="ignore"):
         flown = simulate_model_closed_loop(model, reference, dt=dt, duration=duration)
     return ClosedLoopComparison(
-        truth, flown, rmse_per_state(flown.states, truth.states, system.state_names)
+        truth, flown, rmse_per_state(flown.states, truth.states, vehicle.state_names)
     )
 
 
@@ -74,13 +75,13 @@ def normalized_score(comparisons: Sequence[ClosedLoopComparison]) -> float:
     for comp in comparisons:
         scale = comp.truth.states.std(axis=0)
         scale[scale == 0] = 1.0
-        for i, name in enumerate(comp.truth.system.state_names):
+        for i, name in enumerate(comp.truth.vehicle.state_names):
             values.append(comp.rmse[name] / scale[i])
     return float(np.mean(values))
 
 
 def validation_references(system: str, count: int = 2, seed: int = 1234) -> list[Reference]:
     """Held-out references for lambda selection: smooth random waypoint flights."""
-    ndim = get_system(system).traj_ndim
+    ndim = get_vehicle(system).ndim
     rng = np.random.default_rng(seed)
     return [make_trajectory("random", ndim=ndim, rng=rng) for _ in range(count)]

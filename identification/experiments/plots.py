@@ -45,7 +45,7 @@ def state_grid(names: Sequence[str], ncols: int = 3) -> tuple[Any, np.ndarray]:
 
 def plot_comparison(comp: ClosedLoopComparison, path: str | Path, title: str = "") -> Path:
     """States of truth and model under the same controller (the paper's response figures)."""
-    names = comp.truth.system.state_names
+    names = comp.truth.vehicle.state_names
     fig, axes = state_grid(names)
     for i, (ax, name) in enumerate(zip(axes, names, strict=False)):
         ax.plot(comp.truth.t, comp.truth.states[:, i], label="ground truth", lw=2)
@@ -60,7 +60,7 @@ def plot_abs_error(
     comps: dict[str, ClosedLoopComparison], path: str | Path, title: str = ""
 ) -> Path:
     """|model - truth| over time per state, log scale, one line per run."""
-    names = next(iter(comps.values())).truth.system.state_names
+    names = next(iter(comps.values())).truth.vehicle.state_names
     fig, axes = state_grid(names)
     for label, comp in comps.items():
         err = comp.abs_error

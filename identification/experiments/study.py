@@ -27,8 +27,9 @@ from identification.libraries import planar_library
 from quad_envs.controllers import PlanarPD
 from quad_envs.dynamics import PLANAR_STATE_NAMES
 from quad_envs.fileio import atomic_write_text
-from quad_envs.simulate import planar_system, simulate_closed_loop
+from quad_envs.simulate import simulate_closed_loop
 from quad_envs.trajectories import RandomWaypoints, make_trajectory
+from quad_envs.vehicles import PLANAR
 
 STUDIES = ("lambda", "dt", "samples", "noise")
 FIELDS = (
@@ -40,7 +41,6 @@ def training_data(
     dt: float = 0.01, flights: int = 4, seed: int = 0, duration: float = 10.0
 ) -> list[Trajectory]:
     """Case C plus random-waypoint PD flights with input noise; 10 RK4 substeps per step."""
-    system = planar_system()
     rng = np.random.default_rng(seed)
     pd = PlanarPD()
     refs = [make_trajectory("C")] + [
@@ -57,7 +57,7 @@ def training_data(
             return pd(x, r) + noise[next(count)]
 
         with np.errstate(all="ignore"):
-            run = simulate_closed_loop(system, ref, ctrl, dt=dt, duration=duration, substeps=10)
+            run = simulate_closed_loop(PLANAR, ref, ctrl, dt=dt, duration=duration, substeps=10)
         if np.isfinite(run.states).all() and np.abs(run.states[:, 2]).max() < 1.4:
             trajs.append(Trajectory.from_run(run))
     return trajs

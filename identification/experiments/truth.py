@@ -11,7 +11,7 @@ from identification.features import Term, parse_term, term_name
 from identification.libraries import default_library
 from identification.model import IdentifiedModel
 from quad_envs.params import PAPER_6DOF, PAPER_PLANAR, PlanarQuadParams, Quad6DOFParams
-from quad_envs.simulate import get_system
+from quad_envs.vehicles import get_vehicle
 
 
 def planar_truth(params: PlanarQuadParams = PAPER_PLANAR) -> dict[str, dict[str, float]]:
@@ -154,7 +154,7 @@ def compare_coefficients(
 
 def model_from_truth(system: str, feature_names: Sequence[str] | None = None) -> IdentifiedModel:
     """The ground truth written as a model in a library (default: the system's library)."""
-    sys_ = get_system(system)
+    sys_ = get_vehicle(system)
     names = list(feature_names) if feature_names is not None else default_library(system)
     xi = truth_matrix(truth_for(system), sys_.state_names, names)
     return IdentifiedModel(

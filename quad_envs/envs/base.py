@@ -8,7 +8,6 @@ ground-truth vector field replaced by an identified model's ``rhs``.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -19,98 +18,108 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from quad_envs.integrators import Rhs, rk4_step
-from quad_envs.simulate import System
 from quad_envs.tasks import FlightVolume, out_of_bounds, tracking_reward
 from quad_envs.trajectories import RandomWaypoints, Reference, make_trajectory
 from quad_envs.types import FloatArray
+from quad_envs.vehicles import Vehicle
 
-
-@dataclass(frozen=True)
-class Vehicle:
-    """What distinguishes the planar from the 6-DOF environment.
-
-    Attributes:
-        name: ``planar`` or ``quad6dof``.
-        make_system: Builds the :class:`System` (rhs, saturation, names) for given params.
-        default_params: The paper's vehicle.
-        observe: (states, refs) -> observations, batched; angles in the observation are
-            wrapped to (-pi, pi].
-        obs_names: Names of the observation entries.
-        cost_weights: One weight per observation entry (see :mod:`quad_envs.tasks`).
-        state_bounds: volume -> (low, high) of the states allowed before termination.
-        obs_bounds: volume -> (low, high) of the observation space.
-        init_scale: Per-state half-width of the initial-state perturbation at scale 1.
-        action_bounds: params -> (low, high) of the physical input box.
-        randomized_fields: Parameter fields scaled by domain randomisation.
-    """
-
-    name: str
-    make_system: Callable[[Any], System]
-    default_params: Any
-    observe: Callable[[FloatArray, FloatArray], FloatArray]
-    obs_names: tuple[str, ...]
-    cost_weights: FloatArray
-    state_bounds: Callable[[FlightVolume], tuple[FloatArray, FloatArray]]
-    obs_bounds: Callable[[FlightVolume], tuple[FloatArray, FloatArray]]
-    init_scale: FloatArray
-    action_bounds: Callable[[Any], tuple[FloatArray, FloatArray]]
-    randomized_fields: tuple[str, ...]
-
-
-_RESET_OPTIONS = ("trajectory", "state")
 DEFAULT_VOLUME = FlightVolume()
 
 
+@dataclass(frozen=True)
+class EnvConfig:
+    """Options shared by the single and the vector environment (validated on creation).
+
+    Attributes:
+        trajectory: Reference name (``hover``, ``step``, ``sine``, ``diamond``, ``figure8``,
+            ``random``; ``A``/``B``/``C`` alias the paper cases) or a Reference object.
+        dt: Control period [s]; the action is held over it (zero-order hold).
+        substeps: RK4 substeps per control period.
+        duration: Horizon [s] over which references are tabulated (the time limit comes
+            from registration: ``max_episode_steps``).
+        normalize_actions: Actions in [-1, 1] mapped affinely onto the physical input box
+            (0 is hover thrust and zero moments).
+        init_state_scale: Scale of the uniform initial-state perturbation (0: start at rest
+            on the reference).
+        obs_noise_std: Standard deviation of Gaussian noise added to observations.
+        param_randomization: Fractional uniform perturbation of the vehicle's randomised
+            parameters (mass and inertia) per episode.
+        params: Vehicle parameters (the vehicle's preset by default).
+        volume: Flight volume and attitude limits for termination.
+    """
+
+    trajectory: str | Reference = "hover"
+    dt: float = 0.01
+    substeps: int = 1
+    duration: float = 10.0
+    normalize_actions: bool = False
+    init_state_scale: float = 0.0
+    obs_noise_std: float = 0.0
+    param_randomization: float = 0.0
+    params: Any = None
+    volume: FlightVolume = DEFAULT_VOLUME
+
+    def __post_init__(self) -> None:
+        for name in ("dt", "duration"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value <= 0:
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        if int(self.substeps) != self.substeps or self.substeps < 1:
+            raise ValueError(f"substeps must be a positive integer, got {self.substeps!r}")
+        for name in ("init_state_scale", "obs_noise_std", "param_randomization"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name} must be a non-negative number, got {value!r}")
+        if self.param_randomization >= 1:
+            raise ValueError(f"param_randomization must be below 1, got {self.param_randomization}")
+
+    @classmethod
+    def from_options(cls, options: dict[str, Any]) -> EnvConfig:
+        """Builds the config from keyword options, naming any unknown one."""
+        valid = [f.name for f in fields(cls)]
+        unknown = sorted(set(options) - set(valid))
+        if unknown:
+            raise ValueError(f"unknown env option(s) {unknown}; valid options: {valid}")
+        return cls(**options)
+
+
+_RESET_OPTIONS = ("trajectory", "state")
+
+
 class _EnvCore:
-    """Configuration and episode sampling shared by the single and the vector env."""
+    """Configuration and episode sampling shared by the single and the vector env.
+
+    Subclasses set the class attribute ``vehicle`` (a :class:`Vehicle` preset); an instance
+    replaces it by the same vehicle with the configured parameters.
+    """
 
     vehicle: Vehicle
 
-    def _configure(
-        self,
-        trajectory: str | Reference,
-        dt: float,
-        substeps: int,
-        duration: float,
-        normalize_actions: bool,
-        init_state_scale: float,
-        obs_noise_std: float,
-        param_randomization: float,
-        params: Any,
-        volume: FlightVolume,
-        rhs: Rhs | None,
-    ) -> None:
-        for name, value in (("dt", dt), ("duration", duration)):
-            if not np.isfinite(value) or value <= 0:
-                raise ValueError(f"{name} must be a positive number, got {value!r}")
-        if int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
-        for name, value in (
-            ("init_state_scale", init_state_scale),
-            ("obs_noise_std", obs_noise_std),
-            ("param_randomization", param_randomization),
-        ):
-            if not np.isfinite(value) or value < 0:
-                raise ValueError(f"{name} must be a non-negative number, got {value!r}")
-        if param_randomization >= 1:
-            raise ValueError(f"param_randomization must be below 1, got {param_randomization}")
-        if rhs is not None and param_randomization > 0:
+    def _configure(self, config: EnvConfig, rhs: Rhs | None) -> None:
+        if rhs is not None and config.param_randomization > 0:
             raise ValueError("param_randomization needs the ground-truth physics (rhs=None)")
-        self.dt, self.substeps, self.duration = float(dt), int(substeps), float(duration)
-        self.normalize_actions = bool(normalize_actions)
-        self.init_state_scale, self.obs_noise_std = float(init_state_scale), float(obs_noise_std)
-        self.param_randomization = float(param_randomization)
-        self.params = params if params is not None else self.vehicle.default_params
-        self.volume = volume
+        self.config = config
+        self.dt, self.substeps, self.duration = (
+            float(config.dt),
+            int(config.substeps),
+            float(config.duration),
+        )
+        self.normalize_actions = bool(config.normalize_actions)
+        self.init_state_scale = float(config.init_state_scale)
+        self.obs_noise_std = float(config.obs_noise_std)
+        self.param_randomization = float(config.param_randomization)
+        if config.params is not None:
+            self.vehicle = self.vehicle.with_params(config.params)
+        self.params = self.vehicle.params
+        self.volume = config.volume
         self._custom_rhs = rhs
-        self.system = self.vehicle.make_system(self.params)
-        self._rhs: Rhs = rhs if rhs is not None else self.system.rhs
-        self._trajectory_spec = self._check_trajectory(trajectory)
+        self._rhs: Rhs = rhs if rhs is not None else self.vehicle.rhs
+        self._trajectory_spec = self._check_trajectory(config.trajectory)
         low, high = self.vehicle.action_bounds(self.params)
         self._u_low, self._u_high = low, high
         self._u_center, self._u_half = 0.5 * (high + low), 0.5 * (high - low)
-        self._x_low, self._x_high = self.vehicle.state_bounds(volume)
-        self._obs_low, self._obs_high = self.vehicle.obs_bounds(volume)
+        self._x_low, self._x_high = self.vehicle.state_bounds(self.volume)
+        self._obs_low, self._obs_high = self.vehicle.obs_bounds(self.volume)
         self._single_obs_space = spaces.Box(self._obs_low, self._obs_high, dtype=np.float64)
         if self.normalize_actions:
             m = low.size
@@ -123,16 +132,16 @@ class _EnvCore:
 
     def _check_trajectory(self, trajectory: str | Reference) -> str | Reference:
         if isinstance(trajectory, Reference):
-            if trajectory.ndim != self.system.traj_ndim:
+            if trajectory.ndim != self.vehicle.ndim:
                 raise ValueError(
-                    f"{self.vehicle.name} needs a {self.system.traj_ndim}-D trajectory, "
+                    f"{self.vehicle.name} needs a {self.vehicle.ndim}-D trajectory, "
                     f"got {trajectory.ndim}-D"
                 )
             return trajectory
         # Deterministic references are built once and shared by every episode and member;
         # ``random`` stays a name and is drawn per episode. Unknown names raise here.
         built = make_trajectory(
-            str(trajectory), ndim=self.system.traj_ndim, rng=np.random.default_rng(0)
+            str(trajectory), ndim=self.vehicle.ndim, rng=np.random.default_rng(0)
         )
         return str(trajectory) if isinstance(built, RandomWaypoints) else built
 
@@ -153,11 +162,11 @@ class _EnvCore:
         traj = (
             spec
             if isinstance(spec, Reference)
-            else make_trajectory(spec, ndim=self.system.traj_ndim, rng=rng)
+            else make_trajectory(spec, ndim=self.vehicle.ndim, rng=rng)
         )
-        offset = np.zeros(self.system.n_states)
+        offset = np.zeros(self.vehicle.n_states)
         if self.init_state_scale > 0:
-            offset = rng.uniform(-1.0, 1.0, self.system.n_states) * (
+            offset = rng.uniform(-1.0, 1.0, self.vehicle.n_states) * (
                 self.init_state_scale * self.vehicle.init_scale
             )
         params = self.params
@@ -183,6 +192,19 @@ class _EnvCore:
             obs = obs + self.obs_noise_std * rng_noise(obs.shape)
         return np.minimum(np.maximum(obs, self._obs_low), self._obs_high)
 
+    def action_from_input(self, u: FloatArray) -> FloatArray:
+        """The action that commands the physical input ``u`` (clipped into the action box).
+
+        The inverse of the env's action mapping: with ``normalize_actions`` the input is
+        mapped affinely into [-1, 1]; otherwise it is clipped to the input box.
+        """
+        u = np.asarray(u, dtype=np.float64)
+        if self.normalize_actions:
+            action = np.clip((u - self._u_center) / self._u_half, -1.0, 1.0)
+        else:
+            action = np.clip(u, self._u_low, self._u_high)
+        return action.astype(self._single_act_space.dtype)
+
     def _to_physical(self, action: Any, batch_shape: tuple[int, ...]) -> FloatArray:
         """Validates an action (shape, finiteness) and maps it to a physical input."""
         a = np.asarray(action, dtype=np.float64)
@@ -200,45 +222,19 @@ class QuadrotorEnv(_EnvCore, gym.Env):
     """A quadrotor tracking a reference; subclasses fix the vehicle (see their docstrings).
 
     Args:
-        trajectory: Reference name (``hover``, ``step``, ``sine``, ``diamond``, ``figure8``,
-            ``random``; ``A``/``B``/``C`` alias the paper cases) or a Reference object.
-        dt: Control period [s]; the action is held over it (zero-order hold).
-        substeps: RK4 substeps per control period.
-        duration: Horizon [s] over which references are tabulated (the time limit comes
-            from registration: ``max_episode_steps``).
-        normalize_actions: Actions in [-1, 1] mapped affinely onto the physical input box
-            (0 is hover thrust and zero moments).
-        init_state_scale: Scale of the uniform initial-state perturbation (0: start at rest
-            on the reference).
-        obs_noise_std: Standard deviation of Gaussian noise added to observations.
-        param_randomization: Fractional uniform perturbation of mass and inertia per episode.
-        params: Vehicle parameters (the paper's by default).
-        volume: Flight volume and attitude limits for termination.
         render_mode: ``rgb_array`` or ``human``.
         rhs: Vector field replacing the ground-truth physics (surrogate models).
+        **options: The fields of :class:`EnvConfig` (``trajectory``, ``dt``, ``substeps``,
+            ``duration``, ``normalize_actions``, ``init_state_scale``, ``obs_noise_std``,
+            ``param_randomization``, ``params``, ``volume``).
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
 
     def __init__(
-        self,
-        trajectory: str | Reference = "hover",
-        dt: float = 0.01,
-        substeps: int = 1,
-        duration: float = 10.0,
-        normalize_actions: bool = False,
-        init_state_scale: float = 0.0,
-        obs_noise_std: float = 0.0,
-        param_randomization: float = 0.0,
-        params: Any = None,
-        volume: FlightVolume = DEFAULT_VOLUME,
-        render_mode: str | None = None,
-        rhs: Rhs | None = None,
+        self, render_mode: str | None = None, rhs: Rhs | None = None, **options: Any
     ) -> None:
-        self._configure(
-            trajectory, dt, substeps, duration, normalize_actions, init_state_scale,
-            obs_noise_std, param_randomization, params, volume, rhs,
-        )  # fmt: skip
+        self._configure(EnvConfig.from_options(options), rhs)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
@@ -246,8 +242,9 @@ class QuadrotorEnv(_EnvCore, gym.Env):
         self.render_mode = render_mode
         self.observation_space = self._single_obs_space
         self.action_space = self._single_act_space
-        self._state = np.zeros(self.system.n_states)
+        self._state = np.zeros(self.vehicle.n_states)
         self._k = 0
+        self._was_reset = False
         self._renderer: Any = None
         self._trail: list[FloatArray] = []
 
@@ -275,20 +272,21 @@ class QuadrotorEnv(_EnvCore, gym.Env):
         traj, offset, params = self._sample_episode(self.np_random)
         self._traj = traj
         self._refs = traj(self._t_table)
-        system = self.system if params is self.params else self.vehicle.make_system(params)
-        self._saturate = system.saturate
+        vehicle = self.vehicle if params is self.params else self.vehicle.with_params(params)
+        self._saturate = vehicle.saturate
         if self._custom_rhs is None:
-            self._rhs = system.rhs
+            self._rhs = vehicle.rhs
         if "state" in options:
             x0 = np.asarray(options["state"], dtype=np.float64)
-            if x0.shape != (self.system.n_states,) or not np.isfinite(x0).all():
+            if x0.shape != (self.vehicle.n_states,) or not np.isfinite(x0).all():
                 raise ValueError(
-                    f"options['state'] must be {self.system.n_states} finite numbers, "
+                    f"options['state'] must be {self.vehicle.n_states} finite numbers, "
                     f"got shape {x0.shape}"
                 )
         else:
-            x0 = self.system.initial_state(self._refs[0]) + offset
+            x0 = self.vehicle.initial_state(self._refs[0]) + offset
         self._state, self._k = x0, 0
+        self._was_reset = True
         self._trail = [x0]
         zero_u = np.zeros_like(self._u_low)
         clean = self.vehicle.observe(x0, self._refs[0])
@@ -297,6 +295,8 @@ class QuadrotorEnv(_EnvCore, gym.Env):
 
     def step(self, action: Any) -> tuple[FloatArray, float, bool, bool, dict[str, Any]]:
         """Holds the action over dt (RK4); returns (obs, reward, terminated, False, info)."""
+        if not self._was_reset:
+            raise gym.error.ResetNeeded("call reset() before step()")
         u_cmd = self._to_physical(action, ())
         u = self._saturate(u_cmd)
         self._state = rk4_step(self._rhs, self._state, u, self.dt, self.substeps)
@@ -331,7 +331,7 @@ class QuadrotorEnv(_EnvCore, gym.Env):
         from quad_envs.rendering import QuadRenderer
 
         if self._renderer is None:
-            self._renderer = QuadRenderer(self.vehicle.name, self.params, self.render_mode)
+            self._renderer = QuadRenderer(self.vehicle, self.render_mode)
         refs = self._refs[: min(self._n_table, self._k + 1)]
         return self._renderer.draw(self._state, np.array(self._trail), refs, self._k * self.dt)
 
@@ -356,25 +356,17 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self,
         num_envs: int = 1,
         max_episode_steps: int | None = None,
-        trajectory: str | Reference = "hover",
-        dt: float = 0.01,
-        substeps: int = 1,
-        duration: float = 10.0,
-        normalize_actions: bool = False,
-        init_state_scale: float = 0.0,
-        obs_noise_std: float = 0.0,
-        param_randomization: float = 0.0,
-        params: Any = None,
-        volume: FlightVolume = DEFAULT_VOLUME,
         render_mode: str | None = None,
         rhs: Rhs | None = None,
+        **options: Any,
     ) -> None:
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        self._configure(
-            trajectory, dt, substeps, duration, normalize_actions, init_state_scale,
-            obs_noise_std, param_randomization, params, volume, rhs,
-        )  # fmt: skip
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        self._configure(EnvConfig.from_options(options), rhs)
         self.num_envs = int(num_envs)
         self.max_episode_steps = max_episode_steps
         self.render_mode = render_mode
@@ -382,13 +374,14 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self.single_action_space = self._single_act_space
         self.observation_space = batch_space(self._single_obs_space, self.num_envs)
         self.action_space = batch_space(self._single_act_space, self.num_envs)
-        n = self.system.n_states
+        n = self.vehicle.n_states
         self._states = np.zeros((self.num_envs, n))
         self._k = np.zeros(self.num_envs, dtype=np.int64)
         self._needs_reset = np.zeros(self.num_envs, dtype=bool)
         self._rngs = [np.random.default_rng() for _ in range(self.num_envs)]
         self._trajs: list[Reference] = []
         self._params_list: list[Any] = [self.params] * self.num_envs
+        self._was_reset = False
 
     def reset(
         self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None
@@ -403,6 +396,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self._trajs = [None] * self.num_envs  # type: ignore[list-item]
         self._reset_members(np.ones(self.num_envs, dtype=bool), options.get("state"))
         self._refresh_episode_tables()
+        self._was_reset = True
         clean = self.vehicle.observe(self._states, self._references())
         return self._finish_obs(clean, self._batch_noise, False), {}
 
@@ -412,7 +406,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             self._trajs[i] = traj
             self._params_list[i] = params
             ref0 = traj(0.0)
-            self._states[i] = self.system.initial_state(ref0) + offset
+            self._states[i] = self.vehicle.initial_state(ref0) + offset
         if state is not None:
             x0 = np.broadcast_to(np.asarray(state, dtype=np.float64), self._states.shape)
             if not np.isfinite(x0).all():
@@ -457,11 +451,10 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
                 for f in fields(self.params)
                 if f.name in self.vehicle.randomized_fields
             }
-            params = self.params.replace(**self._batched_params)
-            system = self.vehicle.make_system(params)
-            self._rhs, self._saturate = system.rhs, system.saturate
+            vehicle = self.vehicle.with_params(self.params.replace(**self._batched_params))
+            self._rhs, self._saturate = vehicle.rhs, vehicle.saturate
         else:
-            self._saturate = self.system.saturate
+            self._saturate = self.vehicle.saturate
 
     def _references(self) -> FloatArray:
         if self._batched_traj is None:
@@ -481,6 +474,8 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self, actions: Any
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, dict[str, Any]]:
         """Steps every member; members that ended last step are reset instead (NEXT_STEP)."""
+        if not self._was_reset:
+            raise gym.error.ResetNeeded("call reset() before step() on a vector env")
         u_cmd = self._to_physical(actions, (self.num_envs,))
         resetting = self._needs_reset.copy()
         u = self._saturate(u_cmd)
@@ -516,7 +511,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         from quad_envs.rendering import QuadRenderer
 
         if getattr(self, "_renderer", None) is None:
-            self._renderer = QuadRenderer(self.vehicle.name, self.params, "rgb_array")
+            self._renderer = QuadRenderer(self.vehicle, "rgb_array")
         refs = self._trajs[0](self._t_table[: int(self._k[0]) + 1])
         return self._renderer.draw(self._states[0], self._states[:1], refs, self._k[0] * self.dt)
 

@@ -2,63 +2,8 @@
 
 from __future__ import annotations
 
-import numpy as np
-
-from quad_envs.envs.base import QuadrotorEnv, QuadrotorVectorEnv, Vehicle
-from quad_envs.params import PAPER_PLANAR, PlanarQuadParams
-from quad_envs.simulate import planar_system
-from quad_envs.tasks import COST_WEIGHTS as W
-from quad_envs.tasks import FlightVolume
-from quad_envs.types import FloatArray
-
-
-def planar_observe(states: FloatArray, refs: FloatArray) -> FloatArray:
-    """[state, reference - position, reference - velocity] for (..., 6) states and refs."""
-    return np.concatenate(
-        (states, refs[..., 0:2] - states[..., 0:2], refs[..., 2:4] - states[..., 3:5]), axis=-1
-    )
-
-
-def planar_state_bounds(volume: FlightVolume) -> tuple[FloatArray, FloatArray]:
-    """States allowed before termination: the flight volume and the tilt/speed limits."""
-    v, w = volume.max_speed, volume.max_rate
-    high = np.array([volume.lateral, volume.z_max, volume.max_tilt, v, v, w])
-    low = np.array([-volume.lateral, volume.z_min, -volume.max_tilt, -v, -v, -w])
-    return low, high
-
-
-def planar_obs_bounds(volume: FlightVolume) -> tuple[FloatArray, FloatArray]:
-    """Observation space: the state box, then tracking errors up to twice the volume."""
-    low, high = planar_state_bounds(volume)
-    e_pos = 2 * max(volume.lateral, volume.z_max - volume.z_min)
-    e_vel = 2 * volume.max_speed
-    err = np.array([e_pos, e_pos, e_vel, e_vel])
-    return np.concatenate([low, -err]), np.concatenate([high, err])
-
-
-def planar_action_bounds(params: PlanarQuadParams) -> tuple[FloatArray, FloatArray]:
-    """Box of commandable [u1, u2]: u1 in [2 f_min, 2 f_max], |u2| <= (f_max - f_min) L."""
-    return (
-        np.array([2 * params.rotor_force_min, -params.moment_max]),
-        np.array([params.thrust_max, params.moment_max]),
-    )
-
-
-PLANAR = Vehicle(
-    name="planar",
-    make_system=planar_system,
-    default_params=PAPER_PLANAR,
-    observe=planar_observe,
-    obs_names=("y", "z", "phi", "y_dot", "z_dot", "phi_dot", "e_y", "e_z", "e_y_dot", "e_z_dot"),
-    cost_weights=np.array(
-        [0, 0, W["tilt"], 0, 0, W["rates"], W["pos"], W["pos"], W["vel"], W["vel"]], dtype=float
-    ),
-    state_bounds=planar_state_bounds,
-    obs_bounds=planar_obs_bounds,
-    init_scale=np.array([0.5, 0.5, 0.3, 0.5, 0.5, 1.0]),
-    action_bounds=planar_action_bounds,
-    randomized_fields=("mass", "Ixx"),
-)
+from quad_envs.envs.base import QuadrotorEnv, QuadrotorVectorEnv
+from quad_envs.vehicles import PLANAR
 
 
 class PlanarQuadEnv(QuadrotorEnv):

@@ -1,0 +1,23 @@
+"""Vehicles by name: a new vehicle is one module here plus one line in :data:`VEHICLES`."""
+
+from __future__ import annotations
+
+from quad_envs.vehicles.base import Controller, Vehicle, View
+from quad_envs.vehicles.planar import PLANAR
+from quad_envs.vehicles.quad6dof import QUAD6DOF
+
+VEHICLES: dict[str, Vehicle] = {v.name: v for v in (PLANAR, QUAD6DOF)}
+"""Every registered vehicle with its default (the paper's) parameters."""
+
+
+def get_vehicle(name: str) -> Vehicle:
+    """The vehicle registered as ``name`` (``planar``, ``quad6dof``, ...)."""
+    try:
+        return VEHICLES[name]
+    except KeyError:
+        raise ValueError(
+            f"unknown vehicle {name!r}; valid choices: {', '.join(VEHICLES)}"
+        ) from None
+
+
+__all__ = ["PLANAR", "QUAD6DOF", "VEHICLES", "Controller", "Vehicle", "View", "get_vehicle"]
