@@ -1,4 +1,9 @@
-"""Atomic file output: nothing a user made is left half-written."""
+"""Atomic file output: nothing a user made is left half-written, and others can read it.
+
+Files are written to a temporary file beside the target and renamed into place, with the
+permissions an ordinary ``open()`` would give (0666 less the process umask), not the 0600 of
+:func:`tempfile.mkstemp`. JSON is strict: NaN and infinities become ``null``.
+"""
 
 from __future__ import annotations
 
@@ -12,12 +17,28 @@ from typing import Any
 import numpy as np
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
-    """Writes data to a temporary file beside ``path`` and renames it into place."""
+    """Writes data to a temporary file beside ``path`` and renames it into place.
+
+    Raises:
+        ValueError: ``path`` is a directory, or its folder cannot be created or written.
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    if path.is_dir():
+        raise ValueError(f"{path} is a directory; give a file name")
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise ValueError(f"cannot write {path}: {exc.strerror}") from None
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
             handle.flush()
@@ -34,9 +55,25 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def jsonable(obj: Any) -> Any:
+    """``obj`` with numpy scalars and arrays as Python values and NaN or inf as None."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
 def write_json(path: str | Path, obj: Any) -> Path:
-    """Atomic, indented JSON write."""
-    return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+    """Atomic, indented, strict JSON write (NaN and infinities are written as null)."""
+    text = json.dumps(jsonable(obj), indent=2, sort_keys=False, allow_nan=False)
+    return atomic_write_text(path, text + "\n")
 
 
 def write_csv(path: str | Path, header: Sequence[str], rows: np.ndarray) -> Path:

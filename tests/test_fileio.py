@@ -1,0 +1,38 @@
+import json
+import os
+import stat
+
+import numpy as np
+import pytest
+
+from quad_envs.fileio import write_csv, write_json
+
+
+def test_files_are_readable_by_others_and_follow_the_umask(tmp_path):
+    old = os.umask(0o022)
+    try:
+        path = write_json(tmp_path / "a.json", {"x": 1})
+        csv = write_csv(tmp_path / "b.csv", ["t"], np.zeros((2, 1)))
+    finally:
+        os.umask(old)
+    for p in (path, csv):
+        assert stat.S_IMODE(p.stat().st_mode) == 0o644
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no leftovers
+
+
+def test_json_is_strict_nan_and_inf_become_null(tmp_path):
+    path = write_json(
+        tmp_path / "m.json", {"a": float("nan"), "b": [np.inf, np.float64(2.5)], "c": np.arange(2)}
+    )
+    text = path.read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    assert json.loads(text) == {"a": None, "b": [None, 2.5], "c": [0, 1]}
+
+
+def test_unwritable_targets_raise_one_line_errors(tmp_path):
+    with pytest.raises(ValueError, match="is a directory"):
+        write_json(tmp_path, {})
+    not_a_folder = tmp_path / "file.txt"
+    not_a_folder.write_text("")
+    with pytest.raises(ValueError, match="cannot write"):
+        write_json(not_a_folder / "x.json", {})
