@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import json
+import zipfile
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-import quad_envs  # noqa: F401 (registers the ids)
+import identification  # noqa: F401 (registers the surrogate ids)
 from quad_envs.fileio import write_csv
 
 ALGOS = ("ppo", "sac")
@@ -35,10 +37,48 @@ def make_algo(algo: str, env: gym.Env, seed: int = 0, **kwargs: Any) -> Any:
     raise ValueError(f"unknown algorithm {algo!r}; valid choices: {', '.join(ALGOS)}")
 
 
+def _positive(**values: int) -> None:
+    for name, value in values.items():
+        if int(value) != value or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+
+
+def saved_algo(path: str | Path) -> str:
+    """The algorithm (``ppo`` or ``sac``) of a model saved by stable-baselines3.
+
+    Raises:
+        ValueError: The file is missing or not a stable-baselines3 PPO/SAC archive.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"no such agent file: {path}")
+    try:
+        with zipfile.ZipFile(path) as archive:
+            data = json.loads(archive.read("data"))
+    except (zipfile.BadZipFile, KeyError, json.JSONDecodeError, UnicodeDecodeError):
+        raise ValueError(f"{path} is not a saved stable-baselines3 agent") from None
+    if "clip_range" in data:
+        return "ppo"
+    if "target_entropy" in data or "tau" in data:
+        return "sac"
+    raise ValueError(f"{path} holds an agent of an algorithm other than {', '.join(ALGOS)}")
+
+
+def load_agent(path: str | Path, algo: str | None = None) -> Any:
+    """Loads a saved PPO or SAC agent; ``algo`` (if given) must match what the file holds."""
+    from stable_baselines3 import PPO, SAC
+
+    found = saved_algo(path)
+    if algo is not None and algo != found:
+        raise ValueError(f"{path} holds a {found.upper()} agent, not {algo.upper()}")
+    return (PPO if found == "ppo" else SAC).load(path, device="cpu")
+
+
 def evaluate(
     policy: Any, env_id: str, episodes: int = 5, seed: int = 10_000, **env_kwargs: Any
 ) -> tuple[float, float]:
     """Mean and std of the return of ``policy(obs, info)`` over seeded episodes."""
+    _positive(episodes=episodes)
     env = gym.make(env_id, **env_kwargs)
     returns = []
     for ep in range(episodes):
@@ -73,6 +113,7 @@ def train(
 
     from agents.policies import SB3Policy
 
+    _positive(steps=steps, eval_every=eval_every, eval_episodes=eval_episodes)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     kwargs = {**HOVER_TASK, **(env_kwargs or {})}

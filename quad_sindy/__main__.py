@@ -1,4 +1,4 @@
-"""``python -m quad_envs``: the quad-sindy command line."""
+"""``python -m quad_sindy``: the quad-sindy command line."""
 
 from quad_sindy.cli import main
 

@@ -1,12 +1,21 @@
-"""The ``quad-sindy`` command line: thin wrappers that parse arguments and call the library."""
+"""The ``quad-sindy`` command line: thin wrappers that parse arguments and call the library.
+
+A user's mistake (a bad option value, a missing or malformed file, an output that cannot be
+written) ends with one line ``error: ...`` on stderr and exit status 2, never a traceback.
+Outputs are checked for writability before any long computation starts.
+"""
 
 from __future__ import annotations
 
+import os
+import sys
 from enum import Enum
 from pathlib import Path
 from typing import Annotated
 
 import typer
+
+from quad_sindy import __version__
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__)
 bench_app = typer.Typer(no_args_is_help=True, help="Speed benchmarks (numbers and ratios).")
@@ -25,6 +34,38 @@ def _fail(message: str) -> None:
     raise typer.Exit(2)
 
 
+def _writable_folder(folder: Path) -> None:
+    """Fails unless ``folder`` exists or can be created, and can be written."""
+    if folder.exists() and not folder.is_dir():
+        _fail(f"{folder} is a file, not a folder")
+    existing = next((p for p in (folder, *folder.parents) if p.exists()), Path("."))
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        _fail(f"cannot write to {folder}: {existing} is not writable")
+
+
+def _writable_file(path: Path) -> None:
+    """Fails unless a file can be written at ``path`` (checked before the work starts)."""
+    if path.is_dir():
+        _fail(f"{path} is a directory; give a file name")
+    _writable_folder(path.parent)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"quad-sindy {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option("--version", callback=_version, is_eager=True, help="print the version"),
+    ] = False,
+) -> None:
+    """Gymnasium quadrotor environments and SINDy identification from data."""
+
+
 @app.command()
 def simulate(
     out: Annotated[Path, typer.Option(help="CSV file to write")],
@@ -33,10 +74,15 @@ def simulate(
     dt: Annotated[float, typer.Option(help="control and sample period [s]")] = 0.01,
     duration: Annotated[float, typer.Option(help="final time [s]")] = 10.0,
 ) -> None:
-    """Flies a reference under the PD controller and writes t, states, inputs, references."""
+    """Flies a reference under the vehicle's controller; writes t, states, inputs, references.
+
+    The input columns (``u1, u2``) hold the inputs the rotors applied (after saturation);
+    the controller's commands follow as ``u1_cmd, u2_cmd``.
+    """
     from quad_envs.fileio import write_csv
     from quad_envs.simulate import simulate_case
 
+    _writable_file(out)
     try:
         run = simulate_case(case, system.value, dt=dt, duration=duration)
     except ValueError as exc:
@@ -142,6 +188,9 @@ def reproduce(
     """The paper end to end: simulate, identify (ours and the paper's method), test, report."""
     from identification.experiments.reproduce import run
 
+    if authors_csv is not None and not authors_csv.is_file():
+        _fail(f"no such file: {authors_csv} (--authors-csv)")
+    _writable_folder(out)
     run(out, authors_csv=authors_csv or _shared_reference(), echo=typer.echo)
 
 
@@ -153,6 +202,7 @@ def study(
     """Coefficient error and support against lambda, dt, data size or noise (CSV + PNG)."""
     from identification.experiments.study import run_study
 
+    _writable_folder(out)
     path = run_study(name.value, out)
     typer.echo(f"wrote {path} and {path.with_suffix('.png')}")
 
@@ -232,6 +282,9 @@ def train_cmd(
     """Trains PPO or SAC on the hover task (progress bar, periodic evaluation, curve, model)."""
     from agents.train import train
 
+    if steps < 1 or eval_every < 1:
+        _fail(f"--steps and --eval-every must be positive, got {steps} and {eval_every}")
+    _writable_folder(out)
     kwargs = {"model": str(model)} if model else {}
     result = train(env, algo.value, steps, out, seed, eval_every, env_kwargs=kwargs)
     typer.echo(
@@ -243,20 +296,22 @@ def train_cmd(
 @app.command("evaluate")
 def evaluate_cmd(
     agent: Annotated[Path, typer.Option(help="saved stable-baselines3 model (.zip)")],
-    env: Annotated[str, typer.Option(help="env id")] = "PlanarQuad-v0",
-    algo: Annotated[AlgoName, typer.Option(help="algorithm of the saved model")] = AlgoName.ppo,
+    env: Annotated[str, typer.Option(help="env id (truth or surrogate)")] = "PlanarQuad-v0",
+    algo: Annotated[
+        AlgoName | None, typer.Option(help="algorithm of the saved model (default: detected)")
+    ] = None,
     episodes: Annotated[int, typer.Option(help="episodes")] = 10,
+    model: Annotated[Path | None, typer.Option(help="model JSON for surrogate ids")] = None,
 ) -> None:
-    """Mean return of a trained agent on the hover task."""
-    from stable_baselines3 import PPO, SAC
-
+    """Mean return of a trained agent on the hover task (ground truth or a surrogate)."""
     from agents.policies import SB3Policy
-    from agents.train import HOVER_TASK, evaluate
+    from agents.train import HOVER_TASK, evaluate, load_agent
 
-    if not agent.exists():
-        _fail(f"no such agent file: {agent}")
-    loaded = (PPO if algo is AlgoName.ppo else SAC).load(agent, device="cpu")
-    mean, std = evaluate(SB3Policy(loaded), env, episodes, **HOVER_TASK)
+    if episodes < 1:
+        _fail(f"--episodes must be positive, got {episodes}")
+    loaded = load_agent(agent, algo.value if algo else None)
+    kwargs = {**HOVER_TASK, **({"model": str(model)} if model else {})}
+    mean, std = evaluate(SB3Policy(loaded), env, episodes, **kwargs)
     typer.echo(f"return {mean:.1f} +- {std:.1f} over {episodes} episodes")
 
 
@@ -276,6 +331,7 @@ def mbrl(
     """Dyna-style SINDy model-based RL against model-free RL on the ground truth."""
     from agents.mbrl import run_mbrl
 
+    _writable_folder(out)
     res = run_mbrl(
         out,
         algo.value,
@@ -299,11 +355,30 @@ def demo(
     from quad_envs.plotting import plot_response
     from quad_envs.simulate import simulate_case
 
+    _writable_folder(out)
     for case in "ABC":
         plot_response(simulate_case(case), out / f"case_{case}.png", title=f"Paper case {case}")
     reproduce(out=out, authors_csv=None)
 
 
+USER_ERRORS = (ValueError, OSError, UnicodeDecodeError)
+"""What a user's input can raise inside the library: reported in one line, not a traceback.
+
+The library raises ``ValueError`` naming the problem; the others come from unreadable files.
+Programming errors (TypeError, AttributeError, ...) keep their traceback."""
+
+
 def main() -> None:
-    """Console entry point."""
-    app()
+    """Console entry point: runs the command, reporting a user's mistake in one line."""
+    import gymnasium as gym
+
+    try:
+        app()
+    except (*USER_ERRORS, gym.error.Error) as exc:
+        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+            message = f"{exc.filename}: {exc.strerror}"
+        elif isinstance(exc, UnicodeDecodeError):
+            message = f"an input file is not text ({exc.reason} at byte {exc.start})"
+        typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
+        sys.exit(2)

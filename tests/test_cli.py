@@ -1,0 +1,97 @@
+"""The command line reports a user's mistake in one line with exit status 2."""
+
+import sys
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import quad_envs  # noqa: F401
+from quad_sindy import __version__, cli
+
+
+def run_cli(monkeypatch, capsys, *args: str) -> tuple[int, str, str]:
+    monkeypatch.setattr(sys, "argv", ["quad-sindy", *args])
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main()
+    out, err = capsys.readouterr()
+    return exit_info.value.code, out, err
+
+
+def assert_one_line_error(code: int, err: str, *fragments: str) -> None:
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    for fragment in fragments:
+        assert fragment in lines[0]
+
+
+def test_version(monkeypatch, capsys):
+    code, out, _ = run_cli(monkeypatch, capsys, "--version")
+    assert code == 0 and out.strip() == f"quad-sindy {__version__}"
+
+
+@pytest.fixture
+def ppo_zip(tmp_path_factory):
+    from stable_baselines3 import PPO
+
+    path = tmp_path_factory.mktemp("agent") / "ppo.zip"
+    model = PPO("MlpPolicy", gym.make("PlanarQuad-v0", normalize_actions=True), n_steps=64,
+                batch_size=32, device="cpu")  # fmt: skip
+    model.save(path)
+    return path
+
+
+@pytest.mark.parametrize(
+    "args,fragments",
+    [
+        (["simulate", "--out", "{tmp}"], ["is a directory"]),
+        (["simulate", "--out", "{file}/x.csv"], ["is a file, not a folder"]),
+        (["simulate", "--out", "{tmp}/c.csv", "--case", "nope"], ["unknown trajectory"]),
+        (["reproduce", "--authors-csv", "/nonexistent.csv", "--out", "{tmp}/r"], ["no such"]),
+        (["train", "--out", "{tmp}/t", "--eval-every", "0"], ["must be positive"]),
+        (["train", "--out", "{tmp}/t", "--steps", "-5"], ["must be positive"]),
+        (["evaluate", "--agent", "{file}"], ["not a saved stable-baselines3 agent"]),
+        (["evaluate", "--agent", "{tmp}/missing.zip"], ["no such agent file"]),
+        (["compare", "--model", "{tmp}", "--out", "{tmp}/c"], ["is not a file"]),
+        (["compare", "--model", "{binary}", "--out", "{tmp}/c"], ["not text"]),
+    ],
+)
+def test_user_mistakes_get_one_line(monkeypatch, capsys, tmp_path, args, fragments):
+    a_file = tmp_path / "afile"
+    a_file.write_text("just text\n")
+    binary = tmp_path / "model.json"
+    binary.write_bytes(bytes(np.random.default_rng(0).integers(128, 256, 64, dtype=np.uint8)))
+    names = {"tmp": tmp_path, "file": a_file, "binary": binary}
+    code, _, err = run_cli(monkeypatch, capsys, *(a.format(**names) for a in args))
+    assert_one_line_error(code, err, *fragments)
+
+
+def test_evaluate_checks_the_saved_algorithm(monkeypatch, capsys, ppo_zip):
+    code, _, err = run_cli(
+        monkeypatch, capsys, "evaluate", "--agent", str(ppo_zip), "--algo", "sac"
+    )
+    assert_one_line_error(code, err, "holds a PPO agent, not SAC")
+    code, _, err = run_cli(
+        monkeypatch, capsys, "evaluate", "--agent", str(ppo_zip), "--episodes", "0"
+    )
+    assert_one_line_error(code, err, "--episodes must be positive")
+
+
+def test_evaluate_detects_the_algorithm_and_runs(monkeypatch, capsys, ppo_zip):
+    monkeypatch.setattr(sys, "argv", ["quad-sindy", "evaluate", "--agent", str(ppo_zip),
+                                      "--episodes", "1"])  # fmt: skip
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main()
+    out, _ = capsys.readouterr()
+    assert exit_info.value.code in (0, None)
+    assert "over 1 episodes" in out
+
+
+def test_vector_env_step_before_reset_needs_reset():
+    venv = gym.make_vec("PlanarQuad-v0", num_envs=2)
+    with pytest.raises(gym.error.ResetNeeded):
+        venv.step(np.zeros((2, 2)))
+    env = gym.make("PlanarQuad-v0").unwrapped
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros(2))
