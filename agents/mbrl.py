@@ -126,9 +126,9 @@ def run_mbrl(
 
 
 def _plot(results: dict[str, Any], path: Path) -> None:
-    from identification.experiments.plots import _plt, _save
+    from identification.experiments.plots import pyplot, save_figure
 
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
     mb, mf = results["mbrl"], results["model_free"]
     ax.plot(
@@ -148,4 +148,4 @@ def _plot(results: dict[str, Any], path: Path) -> None:
     ax.set_ylabel("ground-truth return (hover task)")
     ax.grid(alpha=0.3)
     ax.legend()
-    _save(fig, path)
+    save_figure(fig, path)

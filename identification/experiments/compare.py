@@ -94,7 +94,7 @@ def compare_envs(
 
 def write_comparison(comp: EnvComparison, out: str | Path, title: str = "") -> dict[str, Any]:
     """Absolute-error plot, states CSV and summary JSON into ``out``."""
-    from identification.experiments.plots import _save, state_grid
+    from identification.experiments.plots import save_figure, state_grid
     from quad_envs.fileio import write_csv, write_json
 
     out = Path(out)
@@ -106,7 +106,7 @@ def write_comparison(comp: EnvComparison, out: str | Path, title: str = "") -> d
         ax.axhline(comp.tolerance, color="tab:red", lw=0.8, ls="--")
         ax.set_ylabel(f"|error| {name}")
     fig.suptitle(title or "|surrogate - ground truth|, same policy and initial state")
-    _save(fig, out / "abs_error.png")
+    save_figure(fig, out / "abs_error.png")
     header = ["t", *[f"{n}_truth" for n in names], *[f"{n}_surrogate" for n in names]]
     write_csv(out / "states.csv", header, np.column_stack([comp.t, comp.truth, comp.surrogate]))
     summary = {

@@ -11,7 +11,8 @@ import numpy as np
 from identification.experiments.evaluate import ClosedLoopComparison
 
 
-def _plt():
+def pyplot() -> Any:
+    """matplotlib.pyplot on the off-screen Agg backend (unless a backend was chosen)."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -20,20 +21,21 @@ def _plt():
     return plt
 
 
-def _save(fig, path: str | Path) -> Path:
+def save_figure(fig: Any, path: str | Path) -> Path:
+    """Saves a figure as PNG atomically (readable by others) and closes it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
     tmp = path.with_name(f".{path.name}.tmp.png")
     fig.savefig(tmp, dpi=110)
     tmp.replace(path)  # atomic
-    _plt().close(fig)
+    pyplot().close(fig)
     return path
 
 
 def state_grid(names: Sequence[str], ncols: int = 3) -> tuple[Any, np.ndarray]:
     """A figure with one panel per state (shared time axis), panels in reading order."""
-    plt = _plt()
+    plt = pyplot()
     nrows = int(np.ceil(len(names) / ncols))
     fig, axes = plt.subplots(nrows, ncols, figsize=(12, 2.4 * nrows), sharex=True, squeeze=False)
     for ax in axes.ravel()[len(names) :]:
@@ -53,7 +55,7 @@ def plot_comparison(comp: ClosedLoopComparison, path: str | Path, title: str = "
         ax.set_ylabel(name)
     axes[0].legend(fontsize=8)
     fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_abs_error(
@@ -69,7 +71,7 @@ def plot_abs_error(
             ax.set_ylabel(f"|error| {name}")
     axes[0].legend(fontsize=8)
     fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_curves(
@@ -85,7 +87,7 @@ def plot_curves(
     secondary_label: str = "",
 ) -> Path:
     """Generic study plot: one or more curves, optionally a second y axis."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
     for label, ys in curves.items():
         ys_a = np.asarray(ys, dtype=float)
@@ -106,4 +108,4 @@ def plot_curves(
         ax2.set_ylabel(secondary_label, color="tab:red")
     ax.legend(fontsize=8, loc="best")
     ax.set_title(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
