@@ -15,6 +15,7 @@ from typing import Annotated
 
 import typer
 
+from quad_envs.vehicles import VEHICLES
 from quad_sindy import __version__
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__)
@@ -22,11 +23,8 @@ bench_app = typer.Typer(no_args_is_help=True, help="Speed benchmarks (numbers an
 app.add_typer(bench_app, name="bench")
 
 
-class SystemName(str, Enum):
-    """Vehicle models."""
-
-    planar = "planar"
-    quad6dof = "quad6dof"
+SystemName = Enum("SystemName", {name: name for name in VEHICLES}, type=str)
+"""The registered vehicles (``quad_envs.vehicles.VEHICLES``) as command-line choices."""
 
 
 def _fail(message: str) -> None:
