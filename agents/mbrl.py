@@ -1,151 +1,374 @@
-"""Dyna-style model-based RL with SINDy surrogates (the SINDy-RL loop).
+"""Dyna-style model-based RL with SINDy surrogates (the SINDy-RL loop), over seeds.
+
+One seed of the SINDy loop:
 
 1. Collect a little real data with smooth random (Ornstein-Uhlenbeck) exploration.
-2. Identify a SINDy model (RK4-consistent regression) from all real data so far.
+2. Identify a SINDy model from all real data so far (the identifier sees data only), or an
+   ensemble of bagged models (E-SINDy): the policy then trains on the median model or on a
+   member drawn per episode, and imagined episodes end where the members disagree.
 3. Train the policy (PPO or SAC, continued across iterations) in the surrogate env.
 4. Evaluate it on the ground truth; collect on-policy real data; go to 2.
 
 Real-environment interactions counted are the steps used as training data; evaluation
-episodes are reported separately, as in SINDy-RL. The baseline is the same algorithm
-trained model-free on the ground truth, with its learning curve over real steps.
+episodes are reported separately, as in SINDy-RL. The baseline is the same algorithm trained
+model-free on the ground truth. The sample-efficiency figure of a seed is the ratio of the
+real steps each method needs to first reach 95 % of that seed's model-free final return;
+across seeds it is reported as a geometric mean with a 95 % interval.
+
+Every (method, seed) pair is an independent job (:func:`agents.parallel.run_jobs`: in
+process or on Ray, same results), saved as it finishes, so an interrupted experiment resumes.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
+from agents.parallel import run_jobs
 from agents.policies import OrnsteinUhlenbeckPolicy, SB3Policy
-from agents.train import HOVER_TASK, evaluate, make_algo, train
+from agents.tasks import task_kwargs
+from agents.train import ALGOS, evaluate, make_algo, train
 from identification.data import Trajectory
 from identification.fit import FitConfig, fit
 from identification.libraries import default_library
+from identification.model import IdentifiedModel
 from identification.rollouts import collect_rollouts
-from identification.surrogate import make_surrogate
+from identification.surrogate import ENSEMBLE_MODES, make_ensemble_surrogate
 from quad_envs.fileio import write_json
 
-ENV_ID = "PlanarQuad-v0"
+METHODS = ("sindy", "model_free")
 
 
-def _collect(policy: Any, steps: int, seed: int) -> list[Trajectory]:
-    """Episodes of ``policy`` on the real env until ``steps`` transitions are recorded."""
-    trajs, total, ep = [], 0, 0
+@dataclass(frozen=True)
+class MBRLConfig:
+    """One model-based RL experiment.
+
+    Attributes:
+        env_id: Ground-truth env id (its vehicle names the model's variables).
+        task: Task name (:data:`agents.tasks.TASKS`).
+        algo: ``ppo`` or ``sac``.
+        iterations: Model-based iterations per seed.
+        initial_real_steps: Random exploration steps before the first model.
+        real_steps_per_iteration: On-policy real steps collected after each iteration.
+        model_steps_per_iteration: Policy training steps in the surrogate per iteration.
+        baseline_steps: Real steps of the model-free baseline.
+        baseline_evals: Evaluations along the baseline's learning curve.
+        eval_episodes: Ground-truth episodes per evaluation.
+        ensemble: Bagged models (1: a single model).
+        ensemble_mode: ``median`` or ``sample`` (a member per imagined episode).
+        disagreement: Truncate imagined episodes whose one-step member spread (in units of
+            each state's standard deviation in the data) exceeds this (None: never).
+        lam: Sparsity threshold of the identification.
+        env_options: Options of the ground truth only (vehicle parameters, effects): the
+            surrogate gets the task options, never the truth's physics.
+    """
+
+    env_id: str = "PlanarQuad-v0"
+    task: str = "hover"
+    algo: str = "ppo"
+    iterations: int = 4
+    initial_real_steps: int = 2000
+    real_steps_per_iteration: int = 1000
+    model_steps_per_iteration: int = 50_000
+    baseline_steps: int = 200_000
+    baseline_evals: int = 10
+    eval_episodes: int = 5
+    ensemble: int = 1
+    ensemble_mode: str = "median"
+    disagreement: float | None = 0.1
+    lam: float = 1e-3
+    env_options: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.algo not in ALGOS:
+            raise ValueError(f"unknown algorithm {self.algo!r}; valid choices: {ALGOS}")
+        if self.ensemble_mode not in ENSEMBLE_MODES:
+            raise ValueError(f"unknown ensemble mode {self.ensemble_mode!r}: {ENSEMBLE_MODES}")
+        task_kwargs(self.task)  # raises on an unknown task
+        counts = ("iterations", "initial_real_steps", "real_steps_per_iteration",
+                  "model_steps_per_iteration", "baseline_steps", "baseline_evals",
+                  "eval_episodes", "ensemble")  # fmt: skip
+        for name in counts:
+            value = getattr(self, name)
+            if int(value) != value or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+
+    @property
+    def truth_kwargs(self) -> dict[str, Any]:
+        """Options of the ground-truth env: the task and the truth's own physics."""
+        return task_kwargs(self.task, **self.env_options)
+
+    @property
+    def surrogate_kwargs(self) -> dict[str, Any]:
+        """Options of the surrogate env: the task only."""
+        return task_kwargs(self.task)
+
+
+def _collect(config: MBRLConfig, policy: Any, steps: int, seed: int) -> list[Trajectory]:
+    """Episodes of ``policy`` on the ground truth until ``steps`` transitions are recorded."""
+    trajs, total, episode = [], 0, 0
     while total < steps:
         new = collect_rollouts(
-            ENV_ID, policy, 1, seed + ep, max_steps=max(steps - total, 10), env_kwargs=HOVER_TASK
-        )
-        ep += 1
-        for tr in new:
-            trajs.append(tr)
-            total += len(tr) - 1  # transitions
-        if ep > 10 * steps:
+            config.env_id, policy, 1, seed + episode, max_steps=max(steps - total, 10),
+            env_kwargs=config.truth_kwargs,
+        )  # fmt: skip
+        episode += 1
+        for traj in new:
+            trajs.append(traj)
+            total += len(traj) - 1  # transitions
+        if episode > 10 * steps:
             raise RuntimeError("could not collect real data (every episode ended at once)")
     return trajs
 
 
-def run_mbrl(
-    out: str | Path,
-    algo: str = "ppo",
-    iterations: int = 4,
-    initial_real_steps: int = 2000,
-    real_steps_per_iteration: int = 1000,
-    model_steps_per_iteration: int = 50_000,
-    baseline_steps: int = 200_000,
-    seed: int = 0,
-    progress: bool = True,
-) -> dict[str, Any]:
-    """Runs the loop and the model-free baseline; writes ``mbrl.json`` and ``mbrl.png``.
+def identify(
+    data: list[Trajectory], library: list[str], config: MBRLConfig, seed: int
+) -> list[IdentifiedModel]:
+    """The model (or the bagged ensemble) identified from the real data so far.
 
-    Results are written after every iteration, so an interrupted run keeps what it did.
+    Bagging (E-SINDy) resamples 100-step segments of the data with replacement, so every
+    member sees whole transitions of the same flights; member 0 is fitted on all the data.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    env = gym.make(ENV_ID, **HOVER_TASK)
-    data = _collect(OrnsteinUhlenbeckPolicy(env, seed), initial_real_steps, seed)
+    fit_config = FitConfig(lam=config.lam)
+    models = [fit(data, library, fit_config)]
+    segments = [
+        Trajectory(
+            t.t[i : i + 101], t.x[i : i + 101], t.u[i : i + 101], t.state_names, t.input_names
+        )  # fmt: skip
+        for t in data
+        for i in range(0, len(t) - 3, 100)
+        if len(t) - i >= 4
+    ]
+    rng = np.random.default_rng(seed)
+    for _ in range(10 * config.ensemble):
+        if len(models) == config.ensemble:
+            break
+        picks = rng.integers(len(segments), size=len(segments))
+        try:
+            models.append(fit([segments[i] for i in picks], library, fit_config))
+        except (ValueError, np.linalg.LinAlgError):
+            continue  # a resample that cannot determine the model is drawn again
+    return models
+
+
+def _state_scale(data: list[Trajectory]) -> np.ndarray:
+    scale = np.concatenate([t.x for t in data]).std(axis=0)
+    return np.where(scale > 0, scale, 1.0)
+
+
+def sindy_job(config: MBRLConfig, seed: int) -> dict[str, Any]:
+    """One seed of the SINDy model-based loop; returns its learning curve over real steps."""
+    import torch
+
+    torch.set_num_threads(1)  # same floating-point results in process and on Ray workers
+    truth = gym.make(config.env_id, **config.truth_kwargs)
+    vehicle = truth.unwrapped.vehicle
+    library = default_library(vehicle.name)
+    data = _collect(config, OrnsteinUhlenbeckPolicy(truth, seed), config.initial_real_steps, seed)
     real_steps = sum(len(t) - 1 for t in data)
-    lib = default_library("planar")
-    agent = None
-    history: list[dict[str, Any]] = []
-    results: dict[str, Any] = {"algo": algo, "task": HOVER_TASK, "mbrl": history}
-    for it in range(iterations):
-        model = fit(data, lib, FitConfig(lam=1e-3), "planar")
-        model.save(out / f"model_iter{it}.json")
-        surrogate = gym.wrappers.TimeLimit(make_surrogate(model, ENV_ID, **HOVER_TASK), 1000)
+    agent, curve = None, []
+    for iteration in range(config.iterations):
+        models = identify(data, library, config, seed + iteration)
+        surrogate = gym.wrappers.TimeLimit(
+            make_ensemble_surrogate(
+                models, config.env_id, config.ensemble_mode,
+                config.disagreement if config.ensemble > 1 else None, _state_scale(data),
+                **config.surrogate_kwargs,
+            ),
+            truth.spec.max_episode_steps or 1000,
+        )  # fmt: skip
         if agent is None:
-            agent = make_algo(algo, surrogate, seed)
+            agent = make_algo(config.algo, surrogate, seed)
         else:
             agent.set_env(surrogate)
-        agent.learn(model_steps_per_iteration, reset_num_timesteps=False, progress_bar=progress)
-        mean, std = evaluate(SB3Policy(agent), ENV_ID, **HOVER_TASK)
-        history.append(
+        agent.learn(config.model_steps_per_iteration, reset_num_timesteps=False)
+        mean, std = evaluate(
+            SB3Policy(agent), config.env_id, config.eval_episodes, **config.truth_kwargs
+        )
+        curve.append(
             {
-                "iteration": it,
+                "iteration": iteration,
                 "real_steps": real_steps,
-                "model_steps": (it + 1) * model_steps_per_iteration,
+                "model_steps": (iteration + 1) * config.model_steps_per_iteration,
                 "return_mean": mean,
                 "return_std": std,
-                "model_terms": model.n_terms,
+                "model_terms": surrogate.unwrapped.model.n_terms,
             }
         )
-        write_json(out / "mbrl.json", results)
-        new = _collect(
-            SB3Policy(agent, deterministic=False), real_steps_per_iteration, seed + 1000 * (it + 1)
-        )
-        data += new
-        real_steps += sum(len(t) - 1 for t in new)
-    agent.save(out / "mbrl_agent.zip")
+        if iteration + 1 < config.iterations:
+            policy = SB3Policy(agent, deterministic=False)
+            steps, collect_seed = config.real_steps_per_iteration, seed + 1000 * (iteration + 1)
+            new = _collect(config, policy, steps, collect_seed)
+            data += new
+            real_steps += sum(len(t) - 1 for t in new)
+    return {"method": "sindy", "seed": seed, "curve": curve}
 
-    baseline = train(
-        ENV_ID,
-        algo,
-        baseline_steps,
-        out / "model_free",
-        seed,
-        eval_every=max(baseline_steps // 10, 1000),
-        progress=progress,
+
+def model_free_job(config: MBRLConfig, seed: int, out: str) -> dict[str, Any]:
+    """One seed of the model-free baseline on the ground truth; returns its learning curve."""
+    import torch
+
+    torch.set_num_threads(1)
+    eval_every = max(config.baseline_steps // config.baseline_evals, 1)
+    result = train(
+        config.env_id, config.algo, config.baseline_steps, Path(out) / f"model_free_seed{seed}",
+        seed, eval_every, config.eval_episodes, env_kwargs=config.truth_kwargs, progress=False,
+        task=config.task,
+    )  # fmt: skip
+    curve = [{"real_steps": s, "return_mean": m, "return_std": sd} for s, m, sd in result["curve"]]
+    return {"method": "model_free", "seed": seed, "curve": curve}
+
+
+def run_job(method: str, config: MBRLConfig, seed: int, out: str) -> dict[str, Any]:
+    """One (method, seed) job of an experiment: ``sindy`` or ``model_free``."""
+    if method == "sindy":
+        return sindy_job(config, seed)
+    return model_free_job(config, seed, out)
+
+
+def steps_to_reach(curve: list[dict[str, Any]], target: float) -> int | None:
+    """Real steps at the first point of ``curve`` whose return reaches ``target``."""
+    for point in curve:
+        if point["return_mean"] >= target:
+            return int(point["real_steps"])
+    return None
+
+
+def interval(values: list[float], log: bool = False) -> dict[str, float | None]:
+    """Mean and 95 % Student-t interval (geometric with ``log``); None entries for n < 2."""
+    from scipy import stats
+
+    a = np.log(values) if log else np.asarray(values, dtype=float)
+    if a.size == 0:
+        return {"mean": None, "low": None, "high": None, "n": 0}
+    mean = float(a.mean())
+    half = (
+        float(stats.t.ppf(0.975, a.size - 1) * a.std(ddof=1) / np.sqrt(a.size))
+        if a.size > 1
+        else None
     )
-    results["model_free"] = [
-        {"real_steps": s, "return_mean": m, "return_std": sd} for s, m, sd in baseline["curve"]
-    ]
-    final_mf = baseline["final_return"]
-    best_mb = max(history, key=lambda h: h["return_mean"])
-    # Real steps the model-based loop needed to reach 95 % of the model-free final return.
-    reached = [h for h in history if h["return_mean"] >= 0.95 * final_mf]
-    results["summary"] = {
-        "model_free_final_return": final_mf,
-        "model_free_real_steps": baseline_steps,
-        "mbrl_best_return": best_mb["return_mean"],
-        "mbrl_real_steps_to_95pct": reached[0]["real_steps"] if reached else None,
-        "sample_efficiency": baseline_steps / reached[0]["real_steps"] if reached else None,
+    back = np.exp if log else (lambda v: v)
+    return {
+        "mean": float(back(mean)),
+        "low": float(back(mean - half)) if half is not None else None,
+        "high": float(back(mean + half)) if half is not None else None,
+        "n": int(a.size),
     }
+
+
+def summarize(runs: dict[str, dict[int, dict[str, Any]]], seeds: list[int]) -> dict[str, Any]:
+    """Per-seed sample efficiency and its interval over seeds."""
+    per_seed = []
+    for seed in seeds:
+        free, sindy = runs["model_free"][seed]["curve"], runs["sindy"][seed]["curve"]
+        target = 0.95 * free[-1]["return_mean"]
+        free_steps, sindy_steps = steps_to_reach(free, target), steps_to_reach(sindy, target)
+        per_seed.append(
+            {
+                "seed": seed,
+                "model_free_final_return": free[-1]["return_mean"],
+                "target_return": target,
+                "model_free_steps": free_steps,
+                "sindy_steps": sindy_steps,
+                "sindy_best_return": max(p["return_mean"] for p in sindy),
+                "ratio": free_steps / sindy_steps if sindy_steps else None,
+                "ratio_to_budget": free[-1]["real_steps"] / sindy_steps if sindy_steps else None,
+            }
+        )
+    ratios = [s["ratio"] for s in per_seed if s["ratio"] is not None]
+    budget = [s["ratio_to_budget"] for s in per_seed if s["ratio_to_budget"] is not None]
+    return {
+        "seeds": per_seed,
+        "reached": len(ratios),
+        "missed": len(per_seed) - len(ratios),
+        "sample_efficiency": interval(ratios, log=True),
+        "sample_efficiency_vs_budget": interval(budget, log=True),
+        "model_free_final_return": interval([s["model_free_final_return"] for s in per_seed]),
+        "sindy_best_return": interval([s["sindy_best_return"] for s in per_seed]),
+    }
+
+
+def run_experiment(
+    config: MBRLConfig,
+    out: str | Path,
+    seeds: int | list[int] = 5,
+    workers: int = 1,
+    address: str | None = None,
+    echo: Any = print,
+) -> dict[str, Any]:
+    """Runs the SINDy loop and the model-free baseline for every seed; writes ``mbrl.json``.
+
+    Each finished (method, seed) job is saved in ``out/runs/`` at once; a rerun with the same
+    configuration loads those and runs only what is missing.
+
+    Returns:
+        The results: configuration, every curve, and the summary over seeds.
+    """
+    out = Path(out)
+    seed_list = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
+    if not seed_list:
+        raise ValueError("need at least one seed")
+    runs_dir = out / "runs"
+    settings = {**dataclasses.asdict(config), "seeds": seed_list}
+    config_path = out / "config.json"
+    if config_path.exists() and json.loads(config_path.read_text()) != json.loads(
+        json.dumps(settings)
+    ):
+        raise ValueError(f"{out} holds an experiment with another configuration; use a new --out")
+    write_json(config_path, settings)
+    runs: dict[str, dict[int, dict[str, Any]]] = {m: {} for m in METHODS}
+    todo = []
+    for method in METHODS:
+        for seed in seed_list:
+            path = runs_dir / f"{method}_seed{seed}.json"
+            if path.exists():
+                runs[method][seed] = json.loads(path.read_text())
+            else:
+                todo.append((method, config, seed, str(runs_dir)))
+    echo(f"{len(todo)} jobs to run, {2 * len(seed_list) - len(todo)} loaded from {runs_dir}")
+
+    def save(index: int, result: dict[str, Any]) -> None:
+        method, _, seed, _ = todo[index]
+        write_json(runs_dir / f"{method}_seed{seed}.json", result)
+        runs[method][seed] = result
+        echo(f"done: {method} seed {seed}")
+
+    run_jobs(run_job, todo, workers, address, on_done=save)
+    results = {"config": settings, "runs": runs, "summary": summarize(runs, seed_list)}
     write_json(out / "mbrl.json", results)
-    _plot(results, out / "mbrl.png")
+    plot_curves(results, out / "mbrl.png")
     return results
 
 
-def _plot(results: dict[str, Any], path: Path) -> None:
+def plot_curves(results: dict[str, Any], path: Path) -> None:
+    """Ground-truth return against real steps: mean over seeds with a 95 % band per method."""
     from identification.experiments.plots import pyplot, save_figure
 
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
-    mb, mf = results["mbrl"], results["model_free"]
-    ax.plot(
-        [h["real_steps"] for h in mb],
-        [h["return_mean"] for h in mb],
-        "o-",
-        label="SINDy model-based",
-    )
-    ax.plot(
-        [h["real_steps"] for h in mf],
-        [h["return_mean"] for h in mf],
-        "s-",
-        label=f"model-free {results['algo'].upper()}",
-    )
+    labels = {"sindy": "SINDy model-based", "model_free": f"model-free {results['config']['algo']}"}
+    for method, marker in (("sindy", "o-"), ("model_free", "s-")):
+        curves = list(results["runs"][method].values())
+        length = min(len(c["curve"]) for c in curves)
+        steps = np.mean([[p["real_steps"] for p in c["curve"][:length]] for c in curves], axis=0)
+        returns = np.array([[p["return_mean"] for p in c["curve"][:length]] for c in curves])
+        mean = returns.mean(axis=0)
+        ax.plot(steps, mean, marker, label=f"{labels[method]} ({len(curves)} seeds)")
+        if len(curves) > 1:
+            from scipy import stats
+
+            half = stats.t.ppf(0.975, len(curves) - 1) * returns.std(axis=0, ddof=1)
+            half /= np.sqrt(len(curves))
+            ax.fill_between(steps, mean - half, mean + half, alpha=0.2)
     ax.set_xscale("log")
     ax.set_xlabel("real environment steps")
-    ax.set_ylabel("ground-truth return (hover task)")
+    ax.set_ylabel(f"ground-truth return ({results['config']['task']})")
     ax.grid(alpha=0.3)
     ax.legend()
     save_figure(fig, path)

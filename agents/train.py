@@ -11,11 +11,11 @@ import gymnasium as gym
 import numpy as np
 
 import identification  # noqa: F401 (registers the surrogate ids)
+from agents.tasks import HOVER_TASK, task_kwargs
 from quad_envs.fileio import write_csv
 
 ALGOS = ("ppo", "sac")
-HOVER_TASK = {"trajectory": "hover", "normalize_actions": True, "init_state_scale": 1.0}
-"""The RL task used by the agents: hover from a perturbed start, actions in [-1, 1]."""
+__all__ = ["ALGOS", "HOVER_TASK", "evaluate", "load_agent", "make_algo", "train"]
 
 
 def make_algo(algo: str, env: gym.Env, seed: int = 0, **kwargs: Any) -> Any:
@@ -103,8 +103,12 @@ def train(
     eval_episodes: int = 5,
     env_kwargs: dict[str, Any] | None = None,
     progress: bool = True,
+    task: str = "hover",
 ) -> dict[str, Any]:
     """Trains on ``env_id`` with periodic evaluation; saves the model and the learning curve.
+
+    The env gets the options of ``task`` (:data:`agents.tasks.TASKS`) updated with
+    ``env_kwargs``; evaluation runs on the same id with the same options.
 
     Returns:
         Summary with the final evaluation return and the curve.
@@ -116,7 +120,7 @@ def train(
     _positive(steps=steps, eval_every=eval_every, eval_episodes=eval_episodes)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    kwargs = {**HOVER_TASK, **(env_kwargs or {})}
+    kwargs = task_kwargs(task, **(env_kwargs or {}))
     env = gym.make(env_id, **kwargs)
     model = make_algo(algo, env, seed)
     curve: list[tuple[int, float, float]] = []

@@ -8,14 +8,17 @@ saturation and RK4) with the ground-truth vector field replaced by the model's c
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 from gymnasium.envs.registration import load_env_creator, register, registry
 
 import quad_envs
 from identification.model import IdentifiedModel, load_model
+from quad_envs.integrators import rk4_step
 
 
 def _base_class(base_id: str, vector: bool) -> Any:
@@ -92,3 +95,145 @@ def register_surrogate(
         kwargs={"model": model, "base_id": base_id},
     )
     return env_id
+
+
+# -- ensembles ------------------------------------------------------------------------------
+ENSEMBLE_MODES = ("median", "sample")
+
+
+class EnsembleRhs:
+    """The vector fields of K models over one library, evaluated for K states at once.
+
+    Args:
+        models: Models with the same state, input and feature names.
+    """
+
+    def __init__(self, models: Sequence[IdentifiedModel]) -> None:
+        if not models:
+            raise ValueError("an ensemble needs at least one model")
+        first = models[0]
+        names = (first.state_names, first.input_names, first.feature_names)
+        for model in models[1:]:
+            if (model.state_names, model.input_names, model.feature_names) != names:
+                raise ValueError("ensemble members must share state, input and feature names")
+        self.members = list(models)
+        self.coefficients = np.stack([m.coefficients for m in models])  # (K, n, p)
+        self._theta = first.theta
+
+    def __call__(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """dx/dt of member k at x[..., k, :], u[..., k, :]; shape (..., K, n)."""
+        return np.einsum("knp,...kp->...kn", self.coefficients, self._theta(x, u))
+
+    def median_model(self) -> IdentifiedModel:
+        """The model whose coefficients are the members' medians (E-SINDy's aggregate)."""
+        first = self.members[0]
+        meta = {**first.meta, "ensemble_size": len(self.members), "aggregate": "median"}
+        return IdentifiedModel(
+            first.feature_names, np.median(self.coefficients, axis=0), first.state_names,
+            first.input_names, first.system, meta,
+        )  # fmt: skip
+
+
+class _MemberRhs:
+    """The rhs of one member, switchable between episodes."""
+
+    def __init__(self, members: Sequence[IdentifiedModel]) -> None:
+        self.members, self.index = list(members), 0
+
+    def __call__(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return self.members[self.index].rhs(x, u)
+
+
+class EnsembleSurrogate(gym.Wrapper):
+    """A surrogate env driven by an ensemble, ending imagined episodes the models dispute.
+
+    After every step, each member predicts the step from the previous state with the
+    applied input (one RK4 step); the spread of the predictions, per state divided by
+    ``scale`` and maximised over states, is ``info["disagreement"]``. Above ``threshold`` the
+    episode is truncated: the policy never learns from states where the data leave the
+    models undecided. With ``mode="sample"`` each episode is flown by one member drawn
+    from the env's RNG; with ``median`` by the median model.
+
+    Args:
+        env: A surrogate env whose rhs is the ensemble's (see :func:`make_ensemble_surrogate`).
+        ensemble: The members.
+        member_rhs: The switchable rhs of ``sample`` mode (None for ``median``).
+        threshold: Largest tolerated disagreement (None: never truncate).
+        scale: Per-state scale of the disagreement (e.g. the data's standard deviation).
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        ensemble: EnsembleRhs,
+        member_rhs: _MemberRhs | None,
+        threshold: float | None,
+        scale: np.ndarray,
+    ) -> None:
+        super().__init__(env)
+        self.ensemble, self.member_rhs = ensemble, member_rhs
+        self.threshold, self.scale = threshold, np.asarray(scale, dtype=np.float64)
+        self._state: np.ndarray | None = None
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        """Resets the env and, in ``sample`` mode, draws the member for this episode."""
+        obs, info = self.env.reset(**kwargs)
+        if self.member_rhs is not None:
+            self.member_rhs.index = int(
+                self.env.unwrapped.np_random.integers(len(self.ensemble.members))
+            )
+        self._state = np.asarray(self.env.unwrapped.state)
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """Steps the env; truncates where the members' one-step predictions disagree."""
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        base = self.env.unwrapped
+        k = len(self.ensemble.members)
+        x = np.broadcast_to(self._state, (k, self._state.size))
+        u = np.broadcast_to(info["action"], (k, np.size(info["action"])))
+        with np.errstate(all="ignore"):
+            predictions = rk4_step(self.ensemble, x, u, base.dt, base.substeps)
+        spread = np.ptp(predictions, axis=0) / self.scale
+        disagreement = float(np.max(spread)) if np.isfinite(spread).all() else float("inf")
+        info["disagreement"] = disagreement
+        if self.threshold is not None and disagreement > self.threshold and not terminated:
+            truncated = True
+        self._state = np.asarray(info["state"])
+        return obs, reward, terminated, truncated, info
+
+
+def make_ensemble_surrogate(
+    models: Sequence[IdentifiedModel],
+    base_id: str = "PlanarQuad-v0",
+    mode: str = "median",
+    threshold: float | None = None,
+    scale: np.ndarray | None = None,
+    **kwargs: Any,
+) -> EnsembleSurrogate:
+    """A surrogate env flown by an ensemble of models (median or one member per episode).
+
+    Args:
+        models: Ensemble members over the same library (e.g. bagged fits).
+        base_id: The ground-truth env the members stand in for.
+        mode: ``median`` (the median-coefficient model) or ``sample`` (a member per episode).
+        threshold: Truncate an episode where the disagreement exceeds this (None: never).
+        scale: Per-state scale of the disagreement (default 1).
+        **kwargs: Options of the base env (task, dt, ...).
+
+    Returns:
+        The wrapped env; ``env.unwrapped.model`` is the median model.
+    """
+    if mode not in ENSEMBLE_MODES:
+        raise ValueError(f"unknown ensemble mode {mode!r}; valid choices: {ENSEMBLE_MODES}")
+    ensemble = EnsembleRhs(models)
+    median = ensemble.median_model()
+    _, cls = _resolve(median, base_id, vector=False)
+    member_rhs = _MemberRhs(models) if mode == "sample" else None
+    env = cls(rhs=member_rhs if member_rhs is not None else median.rhs, **kwargs)
+    env.model = median
+    n = len(median.state_names)
+    scale = np.ones(n) if scale is None else np.asarray(scale, dtype=np.float64)
+    if scale.shape != (n,) or not (scale > 0).all():
+        raise ValueError(f"scale must be {n} positive numbers, got {scale!r}")
+    return EnsembleSurrogate(env, ensemble, member_rhs, threshold, scale)

@@ -313,10 +313,22 @@ def evaluate_cmd(
     typer.echo(f"return {mean:.1f} +- {std:.1f} over {episodes} episodes")
 
 
+class EnsembleMode(str, Enum):
+    """How an ensemble flies the surrogate."""
+
+    median = "median"
+    sample = "sample"
+
+
 @app.command()
 def mbrl(
-    out: Annotated[Path, typer.Option(help="output folder")] = Path("out/mbrl"),
+    out: Annotated[Path, typer.Option(help="output folder (a rerun resumes)")] = Path("out/mbrl"),
+    env: Annotated[str, typer.Option(help="ground-truth env id")] = "PlanarQuad-v0",
+    task: Annotated[str, typer.Option(help="hover | figure8 | random")] = "hover",
     algo: Annotated[AlgoName, typer.Option(help="algorithm")] = AlgoName.ppo,
+    seeds: Annotated[int, typer.Option(help="seeds for both methods")] = 5,
+    workers: Annotated[int, typer.Option(help="parallel jobs (>1 needs Ray)")] = 1,
+    address: Annotated[str | None, typer.Option(help="Ray cluster to join")] = None,
     iterations: Annotated[int, typer.Option(help="model-based iterations")] = 4,
     initial_real_steps: Annotated[int, typer.Option(help="random exploration steps")] = 2000,
     real_steps: Annotated[int, typer.Option(help="on-policy real steps per iteration")] = 1000,
@@ -324,25 +336,43 @@ def mbrl(
         int, typer.Option(help="surrogate training steps per iteration")
     ] = 50_000,
     baseline_steps: Annotated[int, typer.Option(help="model-free baseline steps")] = 200_000,
-    seed: Annotated[int, typer.Option(help="seed")] = 0,
+    ensemble: Annotated[int, typer.Option(help="bagged models (1: single model)")] = 1,
+    ensemble_mode: Annotated[
+        EnsembleMode, typer.Option(help="median model or a member per episode")
+    ] = EnsembleMode.median,
+    disagreement: Annotated[
+        float, typer.Option(help="end imagined episodes above this member spread (0: never)")
+    ] = 0.1,
 ) -> None:
-    """Dyna-style SINDy model-based RL against model-free RL on the ground truth."""
-    from agents.mbrl import run_mbrl
+    """SINDy model-based RL against model-free RL over seeds (mean and 95 % intervals)."""
+    from agents.mbrl import MBRLConfig, run_experiment
 
+    config = MBRLConfig(
+        env_id=env, task=task, algo=algo.value, iterations=iterations,
+        initial_real_steps=initial_real_steps, real_steps_per_iteration=real_steps,
+        model_steps_per_iteration=model_steps, baseline_steps=baseline_steps,
+        ensemble=ensemble, ensemble_mode=ensemble_mode.value,
+        disagreement=disagreement if disagreement > 0 else None,
+    )  # fmt: skip
     _writable_folder(out)
-    res = run_mbrl(
-        out,
-        algo.value,
-        iterations,
-        initial_real_steps,
-        real_steps,
-        model_steps,
-        baseline_steps,
-        seed,
+    res = run_experiment(config, out, seeds, workers, address, echo=typer.echo)
+    summary = res["summary"]
+    eff = summary["sample_efficiency"]
+    typer.echo(f"model-free final return: {_fmt_interval(summary['model_free_final_return'])}")
+    typer.echo(f"SINDy best return:       {_fmt_interval(summary['sindy_best_return'])}")
+    typer.echo(
+        f"fewer real steps to 95 % of model-free: {_fmt_interval(eff)}x "
+        f"({summary['reached']} of {summary['reached'] + summary['missed']} seeds reached it)"
     )
-    for key, value in res["summary"].items():
-        typer.echo(f"{key}: {value}")
     typer.echo(f"wrote {out}/mbrl.json and {out}/mbrl.png")
+
+
+def _fmt_interval(stats: dict) -> str:
+    if stats["mean"] is None:
+        return "n/a"
+    if stats["low"] is None:
+        return f"{stats['mean']:.3g}"
+    return f"{stats['mean']:.3g} [{stats['low']:.3g}, {stats['high']:.3g}]"
 
 
 @app.command()
@@ -380,3 +410,32 @@ def main() -> None:
             message = f"an input file is not text ({exc.reason} at byte {exc.start})"
         typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
         sys.exit(2)
+
+
+benchmark_app = typer.Typer(no_args_is_help=True, help="Benchmarks on real flight data.")
+app.add_typer(benchmark_app, name="benchmark")
+
+
+@benchmark_app.command("nanodrone")
+def benchmark_nanodrone(
+    data: Annotated[Path, typer.Option(help="folder of training flights (*.parquet)")],
+    out: Annotated[Path, typer.Option(help="output folder")] = Path("out/nanodrone"),
+    test: Annotated[
+        list[Path] | None,
+        typer.Option(help="test flight(s) (repeat); default: last run of each family held out"),
+    ] = None,
+    quiet: Annotated[bool, typer.Option(help="no progress bar")] = False,
+) -> None:
+    """Identifies a Crazyflie from its flight logs and scores it on the nano-drone benchmark."""
+    from identification.experiments.nanodrone import beats_published, run_benchmark
+
+    try:
+        metrics = run_benchmark(data, test, out, progress=not quiet)
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(str(exc))
+    for name, entry in metrics["models"].items():
+        h50 = " / ".join(f"{v:.3f}" for v in entry["mae"]["50"].values())
+        sim = " / ".join(f"{v:.2f}" for v in entry["simerr"].values())
+        typer.echo(f"{name:<8} h=50 {h50}   SimErr {sim}")
+    typer.echo(f"beats every published model: {beats_published(metrics)}")
+    typer.echo(f"wrote {out}/report.md, metrics.json, model.json and figures")

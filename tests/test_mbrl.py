@@ -1,0 +1,104 @@
+"""Model-based RL: the multi-seed experiment, its statistics, resuming, Ray, ensembles."""
+
+import dataclasses
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from agents.mbrl import MBRLConfig, interval, run_experiment, run_job, steps_to_reach, summarize
+from agents.parallel import ray_available, run_jobs
+from identification.experiments.truth import model_from_truth
+from identification.surrogate import EnsembleRhs, make_ensemble_surrogate
+
+TINY = MBRLConfig(
+    iterations=2, initial_real_steps=300, real_steps_per_iteration=200,
+    model_steps_per_iteration=256, baseline_steps=512, baseline_evals=2, eval_episodes=1,
+)  # fmt: skip
+
+
+def test_interval_is_a_student_t_interval_of_the_logs():
+    result = interval([10.0, 40.0], log=True)
+    assert result["mean"] == pytest.approx(20.0)  # geometric mean
+    half = 12.7062047 * np.std(np.log([10, 40]), ddof=1) / np.sqrt(2)  # t(0.975, 1 dof)
+    assert result["low"] == pytest.approx(20.0 * np.exp(-half), rel=1e-6)
+    assert result["high"] == pytest.approx(20.0 * np.exp(half), rel=1e-6)
+    assert interval([3.0])["low"] is None and interval([])["mean"] is None
+
+
+def test_sample_efficiency_counts_steps_to_95_percent_of_the_model_free_final_return():
+    free = [{"real_steps": s, "return_mean": r} for s, r in [(1000, 10), (2000, 96), (3000, 100)]]
+    sindy = [{"real_steps": s, "return_mean": r} for s, r in [(100, 50), (200, 95.5)]]
+    missed = [{"real_steps": 100, "return_mean": 50}]
+    assert steps_to_reach(free, 95.0) == 2000 and steps_to_reach(missed, 95.0) is None
+    runs = {
+        "model_free": {0: {"curve": free}, 1: {"curve": free}},
+        "sindy": {0: {"curve": sindy}, 1: {"curve": missed}},
+    }
+    summary = summarize(runs, [0, 1])
+    assert summary["seeds"][0]["ratio"] == pytest.approx(10.0)  # 2000 / 200
+    assert summary["seeds"][0]["ratio_to_budget"] == pytest.approx(15.0)  # 3000 / 200
+    assert summary["seeds"][1]["ratio"] is None
+    assert (summary["reached"], summary["missed"]) == (1, 1)
+
+
+def test_experiment_runs_saves_each_job_and_resumes(tmp_path):
+    messages = []
+    first = run_experiment(TINY, tmp_path, seeds=2, echo=messages.append)
+    assert messages[0].startswith("4 jobs to run")
+    saved = json.loads((tmp_path / "mbrl.json").read_text())
+    assert set(saved["runs"]) == {"sindy", "model_free"}
+    assert len(saved["runs"]["sindy"]["0"]["curve"]) == TINY.iterations
+    real = [p["real_steps"] for p in saved["runs"]["sindy"]["0"]["curve"]]
+    assert real[0] >= TINY.initial_real_steps and real[1] >= real[0] + 200
+    assert (tmp_path / "mbrl.png").stat().st_size > 0
+    messages.clear()
+    again = run_experiment(TINY, tmp_path, seeds=2, echo=messages.append)
+    assert messages[0].startswith("0 jobs to run, 4 loaded")
+    assert again["summary"] == json.loads(json.dumps(first["summary"]))
+    with pytest.raises(ValueError, match="another configuration"):
+        run_experiment(MBRLConfig(iterations=3), tmp_path, seeds=2)
+
+
+@pytest.mark.skipif(not ray_available(), reason="Ray (the optional extra) is not installed")
+def test_ray_gives_the_same_results_as_in_process(tmp_path):
+    config = dataclasses.replace(TINY, iterations=1)
+    args = [("sindy", config, seed, str(tmp_path)) for seed in (0, 1)]
+    in_process = run_jobs(run_job, args)
+    on_ray = run_jobs(run_job, args, workers=2)
+    assert on_ray == in_process
+    assert in_process[0] != in_process[1]  # the seeds matter
+
+
+def test_jobs_validate_workers():
+    with pytest.raises(ValueError, match="workers"):
+        run_jobs(run_job, [], workers=0)
+
+
+def test_ensemble_median_and_disagreement_truncation():
+    exact = model_from_truth("planar")
+    biased = model_from_truth("planar")
+    biased.coefficients = biased.coefficients * 1.5
+    ensemble = EnsembleRhs([exact, exact, biased])
+    np.testing.assert_array_equal(ensemble.median_model().coefficients, exact.coefficients)
+    x = np.zeros((3, 6))
+    u = np.tile([2.0, 0.01], (3, 1))
+    np.testing.assert_allclose(ensemble(x, u)[2], 1.5 * exact.rhs(x[0], u[0]))
+
+    agree = make_ensemble_surrogate([exact, exact], "PlanarQuad-v0", threshold=1e-9)
+    dispute = make_ensemble_surrogate([exact, biased], "PlanarQuad-v0", threshold=1e-6)
+    for env, should_truncate in ((agree, False), (dispute, True)):
+        env.reset(seed=0)
+        _, _, terminated, truncated, info = env.step(np.array([2.0, 0.01]))
+        assert truncated is should_truncate and not terminated
+        assert (info["disagreement"] > 1e-6) is should_truncate
+    sample = make_ensemble_surrogate([exact, biased], "PlanarQuad-v0", mode="sample")
+    drawn = set()
+    for seed in range(8):
+        sample.reset(seed=seed)
+        drawn.add(sample.member_rhs.index)
+    assert drawn == {0, 1}
+    with pytest.raises(ValueError, match="mode"):
+        make_ensemble_surrogate([exact], "PlanarQuad-v0", mode="mean")
+    assert isinstance(gym.wrappers.TimeLimit(agree, 10), gym.Wrapper)
