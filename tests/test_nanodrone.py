@@ -199,3 +199,185 @@ def test_real_flight_spikes_removed():
     traj = read_flight(FLIGHTS / "multisine_20251017_run1.parquet")
     assert sum(traj.meta["cleaning"]["motor_spikes"]) == 2
     assert traj.u.max() < 3000 and traj.u.min() > 300
+
+
+# -- the rotorcraft library ------------------------------------------------------------
+def _hover_flights(model, count: int, seconds: float, seed: int) -> list[Trajectory]:
+    """Open-loop flights of ``model`` from hover under small zero-mean motor-speed waves."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds / model.dt) + 1
+    t = np.arange(n) * model.dt
+    hover = np.sqrt(9.81 / model.thrust_coefficient / 4.0)
+    names = ("omega1", "omega2", "omega3", "omega4")
+    flights = []
+    for _ in range(count):
+        freq, phase = rng.uniform(0.5, 4.0, (3, 4)), rng.uniform(0, 2 * np.pi, (3, 4))
+        wave = np.sin(2 * np.pi * freq[None] * t[:, None, None] + phase[None]).sum(1)
+        omega = hover * (1.0 + 0.004 * wave + 0.01 * rng.normal())
+        x0 = np.zeros(12)
+        x0[2], x0[5] = 1.0, rng.uniform(-1, 1)
+        states = model.simulate(x0, omega[:-1], a0=omega[0])
+        flights.append(Trajectory(t, states, omega, QUAD6DOF_STATE_NAMES, names))
+    return flights
+
+
+def test_nominal_model_equals_the_toolkit_rigid_body():
+    import torch
+
+    from identification.rotorcraft import NANODRONE_NOMINAL as V
+    from identification.rotorcraft import nominal_model
+    from quad_envs.dynamics import quad6dof_rhs
+    from quad_envs.params import Quad6DOFParams
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(50, 12)) * [1, 1, 1, 0.5, 0.5, 2, 1, 1, 1, 3, 3, 3]
+    omega = rng.uniform(1200, 2400, size=(50, 4))
+    z = np.hstack([x, omega])
+    ours = nominal_model().rhs_torch()(torch.as_tensor(z), torch.as_tensor(omega)).numpy()
+    sq = omega**2
+    u = np.column_stack(
+        [
+            V.kt * sq.sum(1),
+            V.kt * V.arm * (sq[:, 2] + sq[:, 3] - sq[:, 0] - sq[:, 1]),
+            V.kt * V.arm * (sq[:, 1] + sq[:, 2] - sq[:, 0] - sq[:, 3]),
+            V.kc * (sq[:, 1] + sq[:, 3] - sq[:, 0] - sq[:, 2]),
+        ]
+    )
+    params = Quad6DOFParams(mass=V.mass, Jxx=V.jxx, Jyy=V.jyy, Jzz=V.jzz)
+    np.testing.assert_allclose(ours[:, :12], quad6dof_rhs(x, u, params), rtol=1e-10, atol=1e-9)
+
+
+def test_identification_recovers_a_known_model_from_synthetic_flights():
+    from identification.experiments.nanodrone import loss_scales
+    from identification.rotorcraft import (
+        FEATURE_NAMES,
+        fit_equation_error,
+        make_windows,
+        nominal_model,
+        refine,
+    )
+
+    truth = nominal_model()
+    xi = truth.coefficients.copy()
+    xi[0, FEATURE_NAMES.index("S u")] = -2e-4  # rotor drag
+    xi[1, FEATURE_NAMES.index("S v")] = -2e-4
+    xi[3, FEATURE_NAMES.index("p")] = -3.0  # rate damping
+    xi[4, FEATURE_NAMES.index("q")] = -3.0
+    truth = type(truth)(xi, tau=0.03, dt=0.01)
+    flights = _hover_flights(truth, 6, 2.0, seed=4)
+    model = fit_equation_error(flights[:5], tau=0.03, threshold=0.02)
+    # Equation error on exact (noise-free) data already finds the thrust term.
+    assert model.thrust_coefficient == pytest.approx(truth.thrust_coefficient, rel=0.02)
+    windows = make_windows(flights[:5], 50, 10, model.actuator_states)
+    refined = refine(model, windows, loss_scales(windows), iterations=10)
+    assert refined.thrust_coefficient == pytest.approx(truth.thrust_coefficient, rel=0.01)
+    held = flights[5]
+    pred = refined.simulate(held.x[0], held.u[:99], a0=held.u[0])
+    # A tenth of a metre or degree would mean a wrong model; the truth flies 1 s the same.
+    assert np.abs(pred[:, :3] - held.x[:100, :3]).max() < 0.01
+    assert np.abs(pred[:, 3:6] - held.x[:100, 3:6]).max() < 0.01
+    assert "W" in " ".join(refined.equations())
+
+
+def test_rotorcraft_model_save_load_and_bad_input(tmp_path):
+    from identification.rotorcraft import RotorcraftModel, load_rotorcraft, nominal_model
+
+    model = nominal_model()
+    path = model.save(tmp_path / "model.json")
+    back = load_rotorcraft(path)
+    np.testing.assert_array_equal(back.coefficients, model.coefficients)
+    with pytest.raises(ValueError, match="coefficients must have shape"):
+        RotorcraftModel(np.zeros((6, 3)))
+    with pytest.raises(ValueError, match="tau"):
+        RotorcraftModel(model.coefficients, tau=-1.0)
+    (tmp_path / "bad.json").write_text("{}")
+    with pytest.raises(ValueError, match="not a quad-sindy rotorcraft model"):
+        load_rotorcraft(tmp_path / "bad.json")
+
+
+# -- the benchmark protocol ------------------------------------------------------------
+def test_protocol_hold_and_physics_baselines_against_direct_computation():
+    from identification.experiments.nanodrone import (
+        hold_rollout,
+        mae_by_horizon,
+        physics_rollout,
+    )
+    from identification.rotorcraft import make_windows
+
+    # A flight the zero-angular-acceleration physics flies exactly: constant rates.
+    x0 = np.zeros(12)
+    x0[2], x0[3], x0[9:12] = 1.0, 0.2, (0.5, -0.3, 0.8)
+    omega = 1750 + 30 * np.sin(np.arange(160)[:, None] * 0.1 + np.arange(4))
+    states = physics_rollout(x0[None], omega[None, :-1])[0].numpy()
+    names = ("omega1", "omega2", "omega3", "omega4")
+    t = np.arange(160) * 0.01
+    flight = Trajectory(t, np.vstack([x0, states]), omega, QUAD6DOF_STATE_NAMES, names)
+    windows = make_windows([flight], 50, 1)
+    assert len(windows) == 160 - 50
+    phys = mae_by_horizon(lambda w: physics_rollout(w.x0, w.omega), windows, chunk=37)
+    for group in ("position", "velocity", "attitude", "rates"):
+        assert phys[group].max() < 1e-6
+    hold = mae_by_horizon(lambda w: hold_rollout(w.x0, w.omega), windows, chunk=37)
+    direct = np.mean([np.linalg.norm(flight.x[i + 10, 0:3] - flight.x[i, 0:3]) for i in range(110)])
+    assert hold["position"][9] == pytest.approx(direct, rel=1e-12)
+    assert hold["rates"].max() == 0.0  # the rates are constant
+
+
+def test_split_flights_holds_out_the_last_run_of_each_family():
+    from identification.experiments.nanodrone import split_flights
+
+    names = [f"{f}_20251017_run{r}.parquet" for f in ("square", "random1") for r in (1, 2, 5)]
+    kept, held = split_flights([Path(n) for n in names])
+    assert [p.name for p in held] == [
+        "random1_20251017_run5.parquet",
+        "square_20251017_run5.parquet",
+    ]
+    assert len(kept) == 4
+
+
+@needs_flights
+def test_benchmark_end_to_end_on_small_slices(tmp_path):
+    import json
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from identification.experiments.nanodrone import run_benchmark
+
+    data = tmp_path / "data"
+    data.mkdir()
+    for name in ("square_20251017_run1", "square_20251017_run2", "random1_20251017_run1",
+                 "random1_20251017_run2"):  # fmt: skip
+        table = pq.read_table(FLIGHTS / f"{name}.parquet").slice(300, 400)
+        pq.write_table(table, data / f"{name}.parquet")
+    test_file = tmp_path / "other_flight.parquet"
+    pq.write_table(
+        pq.read_table(FLIGHTS / "random2_20251017_run1.parquet").slice(0, 300), test_file
+    )
+    run_benchmark(
+        data, [test_file], tmp_path / "out", taus=(0.04,), prune_fractions=(0.2,),
+        stride=20, iterations=2, progress=False,
+    )  # fmt: skip
+    saved = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert saved["test_files"] == [str(test_file)] and saved["windows"] == 300 - 50
+    assert set(saved["models"]) == {"sindy", "physics", "hold"}
+    assert saved["models"]["sindy"]["n_terms"] > 0
+    for entry in saved["models"].values():
+        assert set(entry["mae"]) == {"1", "10", "25", "50"}
+        for group in ("position", "velocity", "attitude", "rates"):
+            assert np.isfinite(entry["simerr"][group]) and entry["mae"]["50"][group] >= 0
+    assert saved["train_files"] == sorted(p.name for p in data.glob("*.parquet"))
+    for name in ("report.md", "model.json", "error_vs_horizon.png", "windows.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 0
+    assert "published" in (tmp_path / "out" / "report.md").read_text()
+    _ = pa  # pyarrow is the reader's dependency
+
+
+def test_benchmark_command_rejects_bad_data(tmp_path):
+    from typer.testing import CliRunner
+
+    from quad_sindy.cli import app
+
+    result = CliRunner().invoke(app, ["benchmark", "nanodrone", "--data", str(tmp_path / "none")])
+    assert result.exit_code == 2
+    assert "no such data folder" in result.output
