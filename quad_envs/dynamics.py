@@ -21,6 +21,7 @@ to the commanded input before integrating, as the authors' code does inside its 
 from __future__ import annotations
 
 import numpy as np
+from numba.extending import register_jitable
 
 from quad_envs.params import PlanarQuadParams, Quad6DOFParams
 from quad_envs.types import FloatArray
@@ -51,6 +52,36 @@ def _unpack(x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
     return x.T, u.T
 
 
+def planar_field(
+    phi: FloatArray,
+    y_dot: FloatArray,
+    z_dot: FloatArray,
+    phi_dot: FloatArray,
+    u1: FloatArray,
+    u2: FloatArray,
+    mass: FloatArray,
+    Ixx: FloatArray,
+    gravity: FloatArray,
+) -> tuple[FloatArray, ...]:
+    """The planar equations of motion, elementwise: the one source of them.
+
+    Written on numbers so that numpy evaluates it on arrays (:func:`planar_rhs`) and numba
+    compiles it for single states (:mod:`quad_envs.physics`).
+
+    Returns:
+        (y', z', phi', y_dot', z_dot', phi_dot').
+    """
+    inv_m = 1.0 / mass
+    return (
+        y_dot,
+        z_dot,
+        phi_dot,
+        -u1 * np.sin(phi) * inv_m,
+        u1 * np.cos(phi) * inv_m - gravity,
+        u2 / Ixx,
+    )
+
+
 def planar_rhs(x: FloatArray, u: FloatArray, params: PlanarQuadParams) -> FloatArray:
     """Time derivative of the planar state (no saturation).
 
@@ -63,17 +94,37 @@ def planar_rhs(x: FloatArray, u: FloatArray, params: PlanarQuadParams) -> FloatA
         dx/dt, shape (..., 6).
     """
     (_, _, phi, y_dot, z_dot, phi_dot), (u1, u2) = _unpack(x, u)
-    inv_m = 1.0 / params.mass
     return np.array(
-        (
-            y_dot,
-            z_dot,
-            phi_dot,
-            -u1 * np.sin(phi) * inv_m,
-            u1 * np.cos(phi) * inv_m - params.gravity,
-            u2 / params.Ixx,
-        )
+        planar_field(phi, y_dot, z_dot, phi_dot, u1, u2, params.mass, params.Ixx, params.gravity)
     ).T
+
+
+def planar_drag(
+    phi: FloatArray,
+    vy_rel: FloatArray,
+    vz_rel: FloatArray,
+    d_xy: FloatArray,
+    d_z: FloatArray,
+    c_xy: FloatArray,
+    c_z: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Inertial drag force [N] on the planar vehicle, elementwise.
+
+    The air-relative velocity v = (vy_rel, vz_rel) [m/s] (inertial) is resolved on the body
+    axes b_y = (cos phi, sin phi) and b_z = (-sin phi, cos phi) (b_z is the thrust axis);
+    along each body axis F = -(D + c |v|) v_axis (linear rotor drag D [N s/m], quadratic body
+    drag c [N s^2/m^2]); the result is rotated back to the inertial y-z frame.
+
+    Returns:
+        (F_y, F_z) [N].
+    """
+    c, s = np.cos(phi), np.sin(phi)
+    v_lat = c * vy_rel + s * vz_rel
+    v_up = -s * vy_rel + c * vz_rel
+    speed = np.sqrt(vy_rel * vy_rel + vz_rel * vz_rel)
+    f_lat = -(d_xy + c_xy * speed) * v_lat
+    f_up = -(d_z + c_z * speed) * v_up
+    return c * f_lat - s * f_up, s * f_lat + c * f_up
 
 
 def saturate_planar(u: FloatArray, params: PlanarQuadParams) -> FloatArray:
@@ -99,6 +150,36 @@ def saturate_planar(u: FloatArray, params: PlanarQuadParams) -> FloatArray:
     return np.array((f1 + f2, (f2 - f1) * arm)).T
 
 
+@register_jitable
+def rotation_entries(
+    cf: FloatArray, sf: FloatArray, ct: FloatArray, st: FloatArray, cp: FloatArray, sp: FloatArray
+) -> tuple[FloatArray, ...]:
+    """The nine entries (row-major) of the Z-X-Y body-to-inertial rotation, elementwise.
+
+    Args:
+        cf: cos(phi) (roll), any shape S.
+        sf: sin(phi).
+        ct: cos(theta) (pitch).
+        st: sin(theta).
+        cp: cos(psi) (yaw).
+        sp: sin(psi).
+
+    Returns:
+        (R00, R01, R02, R10, R11, R12, R20, R21, R22), each of shape S.
+    """
+    return (
+        cp * ct - sf * sp * st,
+        -cf * sp,
+        cp * st + ct * sf * sp,
+        ct * sp + cp * sf * st,
+        cf * cp,
+        sp * st - cp * ct * sf,
+        -cf * st,
+        sf,
+        cf * ct,
+    )
+
+
 def rotation_zxy(phi: FloatArray, theta: FloatArray, psi: FloatArray) -> FloatArray:
     """Body-to-inertial rotation for Z-X-Y Euler angles, as printed in the paper.
 
@@ -110,20 +191,13 @@ def rotation_zxy(phi: FloatArray, theta: FloatArray, psi: FloatArray) -> FloatAr
     Returns:
         Rotation matrices, shape S + (3, 3).
     """
-    cf, sf = np.cos(phi), np.sin(phi)
-    ct, st = np.cos(theta), np.sin(theta)
-    cp, sp = np.cos(psi), np.sin(psi)
-    rot = np.empty(np.shape(phi) + (3, 3))
-    rot[..., 0, 0] = cp * ct - sf * sp * st
-    rot[..., 0, 1] = -cf * sp
-    rot[..., 0, 2] = cp * st + ct * sf * sp
-    rot[..., 1, 0] = ct * sp + cp * sf * st
-    rot[..., 1, 1] = cf * cp
-    rot[..., 1, 2] = sp * st - cp * ct * sf
-    rot[..., 2, 0] = -cf * st
-    rot[..., 2, 1] = sf
-    rot[..., 2, 2] = cf * ct
-    return rot
+    entries = rotation_entries(
+        np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta), np.cos(psi), np.sin(psi)
+    )
+    rot = np.empty(np.shape(phi) + (9,))
+    for i, entry in enumerate(entries):
+        rot[..., i] = entry
+    return rot.reshape(np.shape(phi) + (3, 3))
 
 
 def euler_rates_matrix(phi: FloatArray, theta: FloatArray) -> FloatArray:
@@ -148,6 +222,58 @@ def euler_rates_matrix(phi: FloatArray, theta: FloatArray) -> FloatArray:
     return mat
 
 
+def quad6dof_field(
+    phi: FloatArray,
+    theta: FloatArray,
+    psi: FloatArray,
+    vx: FloatArray,
+    vy: FloatArray,
+    vz: FloatArray,
+    p: FloatArray,
+    q: FloatArray,
+    r: FloatArray,
+    u1: FloatArray,
+    u2: FloatArray,
+    u3: FloatArray,
+    u4: FloatArray,
+    mass: FloatArray,
+    jx: FloatArray,
+    jy: FloatArray,
+    jz: FloatArray,
+    g: FloatArray,
+) -> tuple[FloatArray, ...]:
+    """The 6-DOF equations of motion, elementwise: the one source of them.
+
+    Numpy evaluates it on arrays (:func:`quad6dof_rhs`), numba compiles it for single states
+    (:mod:`quad_envs.physics`).
+
+    Returns:
+        The 12 derivatives (x', y', z', phi', theta', psi', u', v', w', p', q', r').
+    """
+    cf, sf = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    cp, sp = np.cos(psi), np.sin(psi)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_entries(cf, sf, ct, st, cp, sp)
+    return (
+        # Inertial velocity R v_B.
+        r00 * vx + r01 * vy + r02 * vz,
+        r10 * vx + r11 * vy + r12 * vz,
+        r20 * vx + r21 * vy + r22 * vz,
+        # Euler angle rates T^-1 omega.
+        ct * p + st * r,
+        q + (sf / cf) * (st * p - ct * r),
+        (-st * p + ct * r) / cf,
+        # Body-frame acceleration.
+        g * cf * st + r * vy - q * vz,
+        -g * sf + p * vz - r * vx,
+        -g * cf * ct + u1 / mass + q * vx - p * vy,
+        # Euler's equation.
+        (u2 - (jz - jy) * q * r) / jx,
+        (u3 - (jx - jz) * r * p) / jy,
+        (u4 - (jy - jx) * p * q) / jz,
+    )
+
+
 def quad6dof_rhs(x: FloatArray, u: FloatArray, params: Quad6DOFParams) -> FloatArray:
     """Time derivative of the 6-DOF state (no saturation), paper section 2.
 
@@ -164,31 +290,50 @@ def quad6dof_rhs(x: FloatArray, u: FloatArray, params: Quad6DOFParams) -> FloatA
         dx/dt, shape (..., 12).
     """
     (_, _, _, phi, theta, psi, vx, vy, vz, p, q, r), (u1, u2, u3, u4) = _unpack(x, u)
-    cf, sf = np.cos(phi), np.sin(phi)
-    ct, st = np.cos(theta), np.sin(theta)
-    cp, sp = np.cos(psi), np.sin(psi)
-    g = params.gravity
-    jx, jy, jz = params.Jxx, params.Jyy, params.Jzz
     return np.array(
-        (
-            # Inertial velocity R v_B (rows of the Z-X-Y rotation).
-            (cp * ct - sf * sp * st) * vx - cf * sp * vy + (cp * st + ct * sf * sp) * vz,
-            (ct * sp + cp * sf * st) * vx + cf * cp * vy + (sp * st - cp * ct * sf) * vz,
-            -cf * st * vx + sf * vy + cf * ct * vz,
-            # Euler angle rates T^-1 omega.
-            ct * p + st * r,
-            q + (sf / cf) * (st * p - ct * r),
-            (-st * p + ct * r) / cf,
-            # Body-frame acceleration.
-            g * cf * st + r * vy - q * vz,
-            -g * sf + p * vz - r * vx,
-            -g * cf * ct + u1 / params.mass + q * vx - p * vy,
-            # Euler's equation.
-            (u2 - (jz - jy) * q * r) / jx,
-            (u3 - (jx - jz) * r * p) / jy,
-            (u4 - (jy - jx) * p * q) / jz,
-        )
+        quad6dof_field(
+            phi,
+            theta,
+            psi,
+            vx,
+            vy,
+            vz,
+            p,
+            q,
+            r,
+            u1,
+            u2,
+            u3,
+            u4,
+            params.mass,
+            params.Jxx,
+            params.Jyy,
+            params.Jzz,
+            params.gravity,
+        )  # fmt: skip
     ).T
+
+
+def body_drag(
+    vx_rel: FloatArray,
+    vy_rel: FloatArray,
+    vz_rel: FloatArray,
+    d_xy: FloatArray,
+    d_z: FloatArray,
+    c_xy: FloatArray,
+    c_z: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Body-frame drag force [N] for the body-frame air-relative velocity [m/s], elementwise.
+
+    F_i = -(D_i + c_i |v|) v_i: linear rotor drag D (d_xy on x and y, d_z on z) [N s/m] and
+    quadratic body drag c (c_xy, c_z) [N s^2/m^2], |v| the air speed.
+
+    Returns:
+        (F_x, F_y, F_z) [N] in the body frame.
+    """
+    speed = np.sqrt(vx_rel * vx_rel + vy_rel * vy_rel + vz_rel * vz_rel)
+    k_xy = d_xy + c_xy * speed
+    return -k_xy * vx_rel, -k_xy * vy_rel, -(d_z + c_z * speed) * vz_rel
 
 
 def saturate_quad6dof(u: FloatArray, params: Quad6DOFParams) -> FloatArray:

@@ -22,7 +22,7 @@ class QuadRenderer:
         mode: ``rgb_array`` or ``human``.
     """
 
-    def __init__(self, vehicle: Vehicle, mode: str) -> None:
+    def __init__(self, vehicle: Vehicle, mode: str, metadata: dict | None = None) -> None:
         import matplotlib
 
         if mode == "rgb_array":

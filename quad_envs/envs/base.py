@@ -1,13 +1,17 @@
 """Shared core of the quadrotor environments: one single env and one native vector env.
 
 Both classes are generic over a :class:`Vehicle` (the planar and 6-DOF modules each define
-one) and step the same batched physics (:mod:`quad_envs.dynamics`) with the same RK4
-(:func:`quad_envs.integrators.rk4_step`). A surrogate environment is the same class with the
-ground-truth vector field replaced by an identified model's ``rhs``.
+one) and step the same compiled kernel (:mod:`quad_envs.physics`): the vehicle's equations of
+motion from :mod:`quad_envs.dynamics`, the optional effects, RK4, observation, reward and
+termination. The single env is the kernel with a batch of one. A surrogate environment is the
+same class with the vector field replaced by an identified model's ``rhs`` (a Python
+``rhs(x, u)`` is integrated by :func:`quad_envs.integrators.rk4_step`; an object with a numba
+``point(x, u, out)`` attribute runs inside the kernel).
 """
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -17,8 +21,10 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from quad_envs import physics
 from quad_envs.integrators import Rhs, rk4_step
-from quad_envs.tasks import FlightVolume, out_of_bounds, tracking_reward
+from quad_envs.params import PRESETS, get_preset
+from quad_envs.tasks import FlightVolume
 from quad_envs.trajectories import RandomWaypoints, Reference, make_trajectory
 from quad_envs.types import FloatArray
 from quad_envs.vehicles import Vehicle
@@ -37,15 +43,22 @@ class EnvConfig:
         substeps: RK4 substeps per control period.
         duration: Horizon [s] over which references are tabulated (the time limit comes
             from registration: ``max_episode_steps``).
-        normalize_actions: Actions in [-1, 1] mapped affinely onto the physical input box
-            (0 is hover thrust and zero moments).
+        normalize_actions: Actions in [-1, 1] mapped affinely onto the physical action box
+            (0 is its middle: hover for the paper vehicle's collective mode).
         init_state_scale: Scale of the uniform initial-state perturbation (0: start at rest
             on the reference).
         obs_noise_std: Standard deviation of Gaussian noise added to observations.
-        param_randomization: Fractional uniform perturbation of the vehicle's randomised
-            parameters (mass and inertia) per episode.
-        params: Vehicle parameters (the vehicle's preset by default).
+        param_randomization: Fractional uniform perturbation per episode of the vehicle's
+            randomised parameters (mass, inertia, rotor time constant, thrust coefficient,
+            drag coefficients).
+        params: Vehicle parameters (overrides ``vehicle``).
         volume: Flight volume and attitude limits for termination.
+        vehicle: Parameter preset: ``paper`` (default), ``crazyflie`` or ``pelican``
+            (:data:`quad_envs.params.PRESETS`).
+        effects: Effects (:class:`quad_envs.physics.Effects`, a dict of its fields, a list
+            of effect names, or ``"all"``); none by default.
+        action_mode: ``collective`` (thrust [N] and moments [N m]), ``rotor_thrusts`` [N]
+            or ``motor_speeds`` [rad/s] (vehicles with a thrust coefficient).
     """
 
     trajectory: str | Reference = "hover"
@@ -58,6 +71,9 @@ class EnvConfig:
     param_randomization: float = 0.0
     params: Any = None
     volume: FlightVolume = DEFAULT_VOLUME
+    vehicle: str = "paper"
+    effects: Any = None
+    action_mode: str = "collective"
 
     def __post_init__(self) -> None:
         for name in ("dt", "duration"):
@@ -72,6 +88,15 @@ class EnvConfig:
                 raise ValueError(f"{name} must be a non-negative number, got {value!r}")
         if self.param_randomization >= 1:
             raise ValueError(f"param_randomization must be below 1, got {self.param_randomization}")
+        if self.vehicle not in PRESETS:
+            raise ValueError(
+                f"unknown vehicle preset {self.vehicle!r}; valid choices: {', '.join(PRESETS)}"
+            )
+        if self.action_mode not in physics.MODES:
+            raise ValueError(
+                f"unknown action_mode {self.action_mode!r}; valid choices: "
+                f"{', '.join(physics.MODES)}"
+            )
 
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> EnvConfig:
@@ -84,6 +109,18 @@ class EnvConfig:
 
 
 _RESET_OPTIONS = ("trajectory", "state")
+
+
+@dataclass
+class _Episode:
+    """What one member draws at reset, in a fixed order from its generator."""
+
+    traj: Reference
+    x0: FloatArray
+    params: Any
+    seed: np.uint64
+    gust: FloatArray
+    bias: FloatArray
 
 
 class _EnvCore:
@@ -108,27 +145,81 @@ class _EnvCore:
         self.init_state_scale = float(config.init_state_scale)
         self.obs_noise_std = float(config.obs_noise_std)
         self.param_randomization = float(config.param_randomization)
-        if config.params is not None:
-            self.vehicle = self.vehicle.with_params(config.params)
-        self.params = self.vehicle.params
+        self.action_mode = config.action_mode
+        params = config.params
+        if params is None:
+            params = get_preset(config.vehicle, self.vehicle.name)
+        self.vehicle = self.vehicle.with_params(params)
+        self.params = params
+        veh = self.vehicle
+        self._n, self._k, self._m = veh.n_states, veh.n_rotors, veh.n_inputs
+        self.effects = physics.Effects.from_spec(config.effects, veh.ndim, self._k)
+        effects = self.effects
+        if rhs is not None and effects.physical:
+            raise ValueError(
+                "rotor_dynamics, drag and wind are part of the ground-truth vector field; "
+                "with rhs= only sensor effects and rotor limits apply"
+            )
+        frac = effects.rotor_max_fraction or (1.0,) * self._k
+        if len(frac) != self._k:
+            raise ValueError(f"effects.rotor_max_fraction needs {self._k} entries, got {len(frac)}")
+        self._frac = np.array(frac)
+        self._rotor_state = effects.rotor_dynamics
+        self._n_ext = self._n + (self._k if self._rotor_state else 0)
         self.volume = config.volume
         self._custom_rhs = rhs
-        self._rhs: Rhs = rhs if rhs is not None else self.vehicle.rhs
+        self._rhs: Rhs = rhs if rhs is not None else veh.rhs
         self._trajectory_spec = self._check_trajectory(config.trajectory)
-        low, high = self.vehicle.action_bounds(self.params)
+        self._mix = np.ascontiguousarray(params.mixer, dtype=np.float64)
+        self._unmix = np.linalg.inv(self._mix)
+        low, high = self._action_box(params)
         self._u_low, self._u_high = low, high
         self._u_center, self._u_half = 0.5 * (high + low), 0.5 * (high - low)
-        self._x_low, self._x_high = self.vehicle.state_bounds(self.volume)
-        self._obs_low, self._obs_high = self.vehicle.obs_bounds(self.volume)
-        self._single_obs_space = spaces.Box(self._obs_low, self._obs_high, dtype=np.float64)
+        self._box = np.stack([low, high])
+        self._x_low, self._x_high = veh.state_bounds(self.volume)
+        self._xbox = np.stack([self._x_low, self._x_high])
+        obs_low, obs_high = veh.obs_bounds(self.volume)
+        weights = np.asarray(veh.cost_weights, dtype=np.float64)
+        self._nobs_vehicle = obs_low.size
+        if self._rotor_state and effects.observe_rotors:
+            f_hi = 2.0 * params.rotor_force_max
+            obs_low = np.concatenate([obs_low, np.zeros(self._k)])
+            obs_high = np.concatenate([obs_high, np.full(self._k, f_hi)])
+            weights = np.concatenate([weights, np.zeros(self._k)])
+        self._obs_low, self._obs_high = obs_low, obs_high
+        self._obsbox = np.stack([obs_low, obs_high, weights])
+        self._single_obs_space = spaces.Box(obs_low, obs_high, dtype=np.float64)
         if self.normalize_actions:
-            m = low.size
             # float32 as RL libraries expect; the physics converts to float64.
-            self._single_act_space = spaces.Box(-1.0, 1.0, (m,), dtype=np.float32)
+            self._single_act_space = spaces.Box(-1.0, 1.0, (low.size,), dtype=np.float32)
         else:
             self._single_act_space = spaces.Box(low, high, dtype=np.float64)
+        self._consts = physics.pack_consts(
+            self.dt, self.substeps, self.action_mode, self.normalize_actions, effects,
+            self.obs_noise_std, veh.ndim,
+        )  # fmt: skip
+        self._P0 = physics.pack_params(params)[None, :]
+        self._delay = int(effects.obs_delay_steps)
+        self._python_field = rhs is not None and not hasattr(rhs, "point")
+        self._kernels = _kernels_of(self)
         self._n_table = int(round(self.duration / self.dt)) + 1
         self._t_table = np.arange(self._n_table) * self.dt
+
+    def _action_box(self, params: Any) -> tuple[FloatArray, FloatArray]:
+        """The physical action box of the configured action mode."""
+        if self.action_mode == "collective":
+            return self.vehicle.action_bounds(params)
+        lo = np.full(self._k, float(params.rotor_force_min))
+        hi = np.full(self._k, float(params.rotor_force_max))
+        if self.action_mode == "rotor_thrusts":
+            return lo, hi
+        kt = float(params.rotor_thrust_per_speed2)
+        if kt <= 0:
+            raise ValueError(
+                "action_mode='motor_speeds' needs a thrust coefficient; the "
+                f"{self.config.vehicle!r} vehicle has none (try vehicle='crazyflie')"
+            )
+        return np.sqrt(lo / kt), np.sqrt(hi / kt)
 
     def _check_trajectory(self, trajectory: str | Reference) -> str | Reference:
         if isinstance(trajectory, Reference):
@@ -146,6 +237,7 @@ class _EnvCore:
         return str(trajectory) if isinstance(built, RandomWaypoints) else built
 
     def _check_options(self, options: dict[str, Any] | None) -> dict[str, Any]:
+        """Validates reset options; a ``trajectory`` applies to the episode(s) it starts."""
         options = dict(options or {})
         unknown = set(options) - set(_RESET_OPTIONS)
         if unknown:
@@ -153,20 +245,39 @@ class _EnvCore:
                 f"unknown reset option(s) {sorted(unknown)}; valid options: {list(_RESET_OPTIONS)}"
             )
         if "trajectory" in options:
-            self._trajectory_spec = self._check_trajectory(options["trajectory"])
+            options["trajectory"] = self._check_trajectory(options["trajectory"])
         return options
 
-    def _sample_episode(self, rng: np.random.Generator) -> tuple[Reference, FloatArray, Any]:
-        """Draws one episode's trajectory, initial-state offset and parameters from rng."""
-        spec = self._trajectory_spec
+    def _check_state(self, state: Any, batch: tuple[int, ...]) -> FloatArray:
+        """options['state']: n (or n + rotors with rotor dynamics) finite numbers per member."""
+        x0 = np.asarray(state, dtype=np.float64)
+        sizes = {self._n, self._n_ext}
+        shapes = [(s,) for s in sorted(sizes)] + [batch + (s,) for s in sorted(sizes) if batch]
+        if x0.shape not in shapes or not np.isfinite(x0).all():
+            raise ValueError(
+                f"options['state'] must be finite with shape {' or '.join(map(str, shapes))}, "
+                f"got shape {x0.shape}"
+            )
+        return x0
+
+    def _hover_thrusts(self, params: Any) -> FloatArray:
+        """Rotor thrusts that give the hover input (limited), the rotor state at reset."""
+        hover = np.zeros(self._m)
+        hover[0] = params.hover_thrust
+        thrust = self._unmix @ hover
+        return np.clip(thrust, params.rotor_force_min, params.rotor_force_max * self._frac)
+
+    def _sample_episode(self, rng: np.random.Generator, spec: Any = None) -> _Episode:
+        """Draws one episode from rng: trajectory, initial state, parameters, noise seeds."""
+        spec = self._trajectory_spec if spec is None else spec
         traj = (
             spec
             if isinstance(spec, Reference)
             else make_trajectory(spec, ndim=self.vehicle.ndim, rng=rng)
         )
-        offset = np.zeros(self.vehicle.n_states)
+        offset = np.zeros(self._n)
         if self.init_state_scale > 0:
-            offset = rng.uniform(-1.0, 1.0, self.vehicle.n_states) * (
+            offset = rng.uniform(-1.0, 1.0, self._n) * (
                 self.init_state_scale * self.vehicle.init_scale
             )
         params = self.params
@@ -177,45 +288,72 @@ class _EnvCore:
                 for name in self.vehicle.randomized_fields
             }
             params = params.replace(**changes)
-        return traj, offset, params
+        x0 = self.vehicle.initial_state(traj(0.0)) + offset
+        if self._rotor_state:
+            x0 = np.concatenate([x0, self._hover_thrusts(params)])
+        seed = physics.new_seed(rng)
+        effects = self.effects
+        gust = np.zeros(self.vehicle.ndim)
+        if effects.gust_std > 0:
+            gust = effects.gust_std * rng.standard_normal(self.vehicle.ndim)
+        bias = np.zeros(self._obs_low.size)
+        if effects.obs_bias_std > 0:
+            bias = effects.obs_bias_std * rng.standard_normal(self._obs_low.size)
+        return _Episode(traj, x0, params, seed, gust, bias)
 
-    def _finish_obs(self, clean: FloatArray, rng_noise: Any, sanitize: bool) -> FloatArray:
-        """Adds observation noise and clips into the observation space.
-
-        Args:
-            clean: Noise-free observations from ``vehicle.observe``.
-            rng_noise: shape -> standard normal draws.
-            sanitize: Replace non-finite entries first (only terminal states can have them).
-        """
-        obs = np.nan_to_num(clean) if sanitize else clean
-        if self.obs_noise_std > 0:
-            obs = obs + self.obs_noise_std * rng_noise(obs.shape)
-        return np.minimum(np.maximum(obs, self._obs_low), self._obs_high)
+    def _set_state(self, x: FloatArray, state: FloatArray, params: Any) -> None:
+        """Writes a reset-option state (rigid part, and rotor thrusts if given) into x."""
+        x[: state.size] = state
+        if self._rotor_state and state.size == self._n:
+            x[self._n :] = self._hover_thrusts(params)
 
     def action_from_input(self, u: FloatArray) -> FloatArray:
-        """The action that commands the physical input ``u`` (clipped into the action box).
+        """The action that commands the collective input ``u`` (clipped into the action box).
 
-        The inverse of the env's action mapping: with ``normalize_actions`` the input is
-        mapped affinely into [-1, 1]; otherwise it is clipped to the input box.
+        The inverse of the env's action mapping: ``u`` goes to rotor thrusts (and motor
+        speeds) for those action modes; with ``normalize_actions`` the result is mapped
+        affinely into [-1, 1].
         """
         u = np.asarray(u, dtype=np.float64)
-        if self.normalize_actions:
-            action = np.clip((u - self._u_center) / self._u_half, -1.0, 1.0)
+        if self.action_mode == "collective":
+            phys = u
         else:
-            action = np.clip(u, self._u_low, self._u_high)
+            phys = u @ self._unmix.T
+            if self.action_mode == "motor_speeds":
+                kt = float(self.params.rotor_thrust_per_speed2)
+                phys = np.sqrt(np.maximum(phys, 0.0) / kt)
+        if self.normalize_actions:
+            action = np.clip((phys - self._u_center) / self._u_half, -1.0, 1.0)
+        else:
+            action = np.clip(phys, self._u_low, self._u_high)
         return action.astype(self._single_act_space.dtype)
 
-    def _to_physical(self, action: Any, batch_shape: tuple[int, ...]) -> FloatArray:
-        """Validates an action (shape, finiteness) and maps it to a physical input."""
-        a = np.asarray(action, dtype=np.float64)
-        expected = batch_shape + self._u_low.shape
-        if a.shape != expected:
-            raise ValueError(f"action must have shape {expected}, got {a.shape}")
-        if not np.isfinite(a).all():
-            raise ValueError(f"action must be finite (no NaN or inf), got {action!r}")
-        if self.normalize_actions:
-            return self._u_center + self._u_half * np.minimum(np.maximum(a, -1.0), 1.0)
-        return np.minimum(np.maximum(a, self._u_low), self._u_high)
+    def _advance(
+        self, X: FloatArray, A: FloatArray, refs: FloatArray, P: FloatArray, rng: Any,
+        gust: FloatArray, bias: FloatArray, active: FloatArray, rhs: Rhs,
+    ) -> tuple[FloatArray, ...]:  # fmt: skip
+        """One control step of the members in place: (obs, reward, end, u, u_cmd)."""
+        kern = self._kernels
+        if A.dtype != np.float64 or not A.flags.c_contiguous:
+            A = np.ascontiguousarray(A, dtype=np.float64)
+        if not self._python_field:
+            obs, reward, end, u, u_cmd, ok = kern.step(
+                kern.vid, X, A, refs, P, self._consts, rng, gust, bias, self._mix, self._unmix,
+                self._box, self._frac, self._obsbox, self._xbox, active,
+            )  # fmt: skip
+        else:
+            u, u_cmd, ok = kern.command(
+                A, P, self._consts, self._mix, self._unmix, self._box, self._frac
+            )
+            if ok:
+                moved = rk4_step(rhs, X[active], u[active], self.dt, self.substeps)
+                X[active] = moved
+                obs, reward, end = kern.finish(
+                    kern.vid, X, refs, self._consts, rng, bias, self._obsbox, self._xbox
+                )
+        if not ok:
+            raise ValueError(f"action must be finite (no NaN or inf), got {A!r}")
+        return obs, reward, end, u, u_cmd
 
 
 class QuadrotorEnv(_EnvCore, gym.Env):
@@ -226,10 +364,16 @@ class QuadrotorEnv(_EnvCore, gym.Env):
         rhs: Vector field replacing the ground-truth physics (surrogate models).
         **options: The fields of :class:`EnvConfig` (``trajectory``, ``dt``, ``substeps``,
             ``duration``, ``normalize_actions``, ``init_state_scale``, ``obs_noise_std``,
-            ``param_randomization``, ``params``, ``volume``).
+            ``param_randomization``, ``params``, ``volume``, ``vehicle``, ``effects``,
+            ``action_mode``).
+
+    Info keys: ``state`` (rigid-body state), ``reference``, ``action`` (the collective input
+    the rotors applied; with rotor dynamics, at the end of the step), ``commanded`` (the
+    collective input commanded, before the rotor limits), ``rotor_thrusts`` (with rotor
+    dynamics: the rotor thrust states [N]), ``time``.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 100}
 
     def __init__(
         self, render_mode: str | None = None, rhs: Rhs | None = None, **options: Any
@@ -239,24 +383,27 @@ class QuadrotorEnv(_EnvCore, gym.Env):
             raise ValueError(
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
+        # One frame per control step: the video plays in real time.
+        self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
         self.render_mode = render_mode
         self.observation_space = self._single_obs_space
         self.action_space = self._single_act_space
-        self._state = np.zeros(self.vehicle.n_states)
-        self._k = 0
+        self._X = np.zeros((1, self._n_ext))
+        self._k_step = 0
         self._was_reset = False
         self._renderer: Any = None
         self._trail: list[FloatArray] = []
+        self._active = np.ones(1, dtype=bool)
 
     @property
     def state(self) -> FloatArray:
-        """The true state (a copy)."""
-        return self._state.copy()
+        """The true rigid-body state (a copy)."""
+        return self._X[0, : self._n].copy()
 
     @property
     def time(self) -> float:
         """Simulated time since reset [s]."""
-        return self._k * self.dt
+        return self._k_step * self.dt
 
     def _reference(self, k: int) -> FloatArray:
         if k < self._n_table:
@@ -266,62 +413,75 @@ class QuadrotorEnv(_EnvCore, gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[FloatArray, dict[str, Any]]:
-        """Starts an episode; options: ``trajectory`` (name or object), ``state`` (initial)."""
+        """Starts an episode; options: ``trajectory`` (this episode only), ``state``."""
         super().reset(seed=seed)
         options = self._check_options(options)
-        traj, offset, params = self._sample_episode(self.np_random)
-        self._traj = traj
-        self._refs = traj(self._t_table)
-        vehicle = self.vehicle if params is self.params else self.vehicle.with_params(params)
-        self._saturate = vehicle.saturate
-        if self._custom_rhs is None:
-            self._rhs = vehicle.rhs
+        episode = self._sample_episode(self.np_random, options.get("trajectory"))
+        self._traj = episode.traj
+        self._refs = episode.traj(self._t_table)
+        params = episode.params
+        if self._custom_rhs is None and params is not self.params:
+            self._rhs = self.vehicle.with_params(params).rhs
+        self._P = physics.pack_params(params)[None, :] if params is not self.params else self._P0
+        x0 = episode.x0
         if "state" in options:
-            x0 = np.asarray(options["state"], dtype=np.float64)
-            if x0.shape != (self.vehicle.n_states,) or not np.isfinite(x0).all():
-                raise ValueError(
-                    f"options['state'] must be {self.vehicle.n_states} finite numbers, "
-                    f"got shape {x0.shape}"
-                )
-        else:
-            x0 = self.vehicle.initial_state(self._refs[0]) + offset
-        self._state, self._k = x0, 0
+            self._set_state(x0, self._check_state(options["state"], ()), params)
+        self._X = x0[None, :].copy()
+        self._k_step = 0
+        self._rng = np.array([episode.seed], dtype=np.uint64)
+        self._gust = episode.gust[None, :]
+        self._bias = episode.bias[None, :]
         self._was_reset = True
-        self._trail = [x0]
-        zero_u = np.zeros_like(self._u_low)
-        clean = self.vehicle.observe(x0, self._refs[0])
-        obs = self._finish_obs(clean, self.np_random.standard_normal, False)
+        self._trail = [self._X[0, : self._n].copy()]
+        kern = self._kernels
+        obs, _, _ = kern.finish(
+            kern.vid, self._X, self._refs[:1], self._consts, self._rng, self._bias,
+            self._obsbox, self._xbox,
+        )  # fmt: skip
+        obs = obs[0]
+        if self._delay:
+            self._history = deque([obs] * (self._delay + 1), maxlen=self._delay + 1)
+            obs = self._history[0].copy()
+        zero_u = np.zeros(self._m)
         return obs, self._info(self._refs[0], zero_u, zero_u)
 
     def step(self, action: Any) -> tuple[FloatArray, float, bool, bool, dict[str, Any]]:
         """Holds the action over dt (RK4); returns (obs, reward, terminated, False, info)."""
         if not self._was_reset:
             raise gym.error.ResetNeeded("call reset() before step()")
-        u_cmd = self._to_physical(action, ())
-        u = self._saturate(u_cmd)
-        self._state = rk4_step(self._rhs, self._state, u, self.dt, self.substeps)
-        self._k += 1
-        ref = self._reference(self._k)
-        terminated = bool(out_of_bounds(self._state, self._x_low, self._x_high))
-        clean = self.vehicle.observe(self._state, ref)
-        reward = 0.0 if terminated else float(tracking_reward(clean, self.vehicle.cost_weights))
-        obs = self._finish_obs(clean, self.np_random.standard_normal, terminated)
+        a = action if isinstance(action, np.ndarray) else np.asarray(action, dtype=np.float64)
+        if a.shape != self._u_low.shape:
+            raise ValueError(f"action must have shape {self._u_low.shape}, got {a.shape}")
+        ref = self._reference(self._k_step + 1)
+        obs, reward, end, u, u_cmd = self._advance(
+            self._X, a.reshape(1, -1), ref.reshape(1, -1), self._P, self._rng, self._gust,
+            self._bias, self._active, self._rhs,
+        )  # fmt: skip
+        self._k_step += 1
+        terminated = bool(end[0])
+        obs = obs[0]
+        if self._delay:
+            self._history.append(obs)
+            obs = self._history[0].copy()
         if self.render_mode is not None:
-            self._trail.append(self._state)
+            self._trail.append(self._X[0, : self._n].copy())
             if self.render_mode == "human":
                 self.render()
-        info = self._info(ref, u, u_cmd)
+        info = self._info(ref, u[0], u_cmd[0])
         info["out_of_bounds"] = terminated
-        return obs, reward, terminated, False, info
+        return obs, float(reward[0]), terminated, False, info
 
     def _info(self, ref: FloatArray, u: FloatArray, u_cmd: FloatArray) -> dict[str, Any]:
-        return {
-            "state": self._state,  # rk4_step returns a fresh array each step
+        info = {
+            "state": self._X[0, : self._n].copy(),
             "reference": ref.copy(),
             "action": u,
             "commanded": u_cmd,
-            "time": self._k * self.dt,
+            "time": self._k_step * self.dt,
         }
+        if self._rotor_state:
+            info["rotor_thrusts"] = self._X[0, self._n :].copy()
+        return info
 
     def render(self) -> FloatArray | None:
         """Draws the vehicle, the reference and the trail (``rgb_array`` returns the image)."""
@@ -331,9 +491,11 @@ class QuadrotorEnv(_EnvCore, gym.Env):
         from quad_envs.rendering import QuadRenderer
 
         if self._renderer is None:
-            self._renderer = QuadRenderer(self.vehicle, self.render_mode)
-        refs = self._refs[: min(self._n_table, self._k + 1)]
-        return self._renderer.draw(self._state, np.array(self._trail), refs, self._k * self.dt)
+            self._renderer = QuadRenderer(self.vehicle, self.render_mode, self.metadata)
+        refs = self._refs[: min(self._n_table, self._k_step + 1)]
+        return self._renderer.draw(
+            self._X[0, : self._n], np.array(self._trail), refs, self._k_step * self.dt
+        )
 
     def close(self) -> None:
         """Closes the render window."""
@@ -341,13 +503,33 @@ class QuadrotorEnv(_EnvCore, gym.Env):
             self._renderer.close()
             self._renderer = None
 
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None  # a figure does not pickle; it is rebuilt on demand
+        state["_kernels"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._kernels = _kernels_of(self)
+
+
+def _kernels_of(env: _EnvCore) -> physics.Kernels:
+    """The compiled kernels of an env's vector field."""
+    rhs = env._custom_rhs
+    if rhs is not None and hasattr(rhs, "point"):
+        return physics.point_rhs_kernels(env.vehicle.name, rhs.point)
+    return physics.vehicle_kernels(env.vehicle.name)
+
 
 class QuadrotorVectorEnv(_EnvCore, VectorEnv):
     """Native batched version of :class:`QuadrotorEnv` (same arguments, plus ``num_envs``).
 
     Member i is seeded with ``seed + i`` and draws its episodes exactly as a single env
     seeded that way, so the vector env equals N single envs step for step. Autoreset is
-    Gymnasium's NEXT_STEP mode; truncation comes from ``max_episode_steps``.
+    Gymnasium's NEXT_STEP mode; truncation comes from ``max_episode_steps``. A reset
+    option ``trajectory`` applies to the episodes that reset starts (autoresets go back to
+    the configured one); ``state`` is one state for all members or one per member.
     """
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -367,6 +549,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
                 f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
         self._configure(EnvConfig.from_options(options), rhs)
+        self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.dt))}
         self.num_envs = int(num_envs)
         self.max_episode_steps = max_episode_steps
         self.render_mode = render_mode
@@ -374,13 +557,17 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self.single_action_space = self._single_act_space
         self.observation_space = batch_space(self._single_obs_space, self.num_envs)
         self.action_space = batch_space(self._single_act_space, self.num_envs)
-        n = self.vehicle.n_states
-        self._states = np.zeros((self.num_envs, n))
-        self._k = np.zeros(self.num_envs, dtype=np.int64)
-        self._needs_reset = np.zeros(self.num_envs, dtype=bool)
-        self._rngs = [np.random.default_rng() for _ in range(self.num_envs)]
+        b = self.num_envs
+        self._states = np.zeros((b, self._n_ext))
+        self._k = np.zeros(b, dtype=np.int64)
+        self._needs_reset = np.zeros(b, dtype=bool)
+        self._rngs = [np.random.default_rng() for _ in range(b)]
         self._trajs: list[Reference] = []
-        self._params_list: list[Any] = [self.params] * self.num_envs
+        self._params_list: list[Any] = [self.params] * b
+        self._rng_state = np.zeros(b, dtype=np.uint64)
+        self._gust = np.zeros((b, self.vehicle.ndim))
+        self._bias = np.zeros((b, self._obs_low.size))
+        self._P = self._P0
         self._was_reset = False
 
     def reset(
@@ -393,41 +580,53 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
                 raise ValueError(f"need {self.num_envs} seeds, got {len(seeds)}")
             self._rngs = [np.random.default_rng(s) for s in seeds]
         options = self._check_options(options)
+        state = None
+        if "state" in options:
+            state = self._check_state(options["state"], (self.num_envs,))
         self._trajs = [None] * self.num_envs  # type: ignore[list-item]
-        self._reset_members(np.ones(self.num_envs, dtype=bool), options.get("state"))
+        everyone = np.ones(self.num_envs, dtype=bool)
+        self._reset_members(everyone, state, options.get("trajectory"))
         self._refresh_episode_tables()
+        self._needs_reset[:] = False
         self._was_reset = True
-        clean = self.vehicle.observe(self._states, self._references())
-        return self._finish_obs(clean, self._batch_noise, False), {}
+        kern = self._kernels
+        obs, _, _ = kern.finish(
+            kern.vid, self._states, self._references(), self._consts, self._rng_state,
+            self._bias, self._obsbox, self._xbox,
+        )  # fmt: skip
+        if self._delay:
+            self._history = np.repeat(obs[:, None, :], self._delay + 1, axis=1)
+            obs = self._history[:, 0].copy()
+        return obs, {}
 
-    def _reset_members(self, mask: FloatArray, state: Any = None) -> None:
+    def _reset_members(self, mask: FloatArray, state: Any = None, spec: Any = None) -> None:
         for i in np.flatnonzero(mask):
-            traj, offset, params = self._sample_episode(self._rngs[i])
-            self._trajs[i] = traj
-            self._params_list[i] = params
-            ref0 = traj(0.0)
-            self._states[i] = self.vehicle.initial_state(ref0) + offset
-        if state is not None:
-            x0 = np.broadcast_to(np.asarray(state, dtype=np.float64), self._states.shape)
-            if not np.isfinite(x0).all():
-                raise ValueError("options['state'] must be finite")
-            self._states[mask] = x0[mask]
+            episode = self._sample_episode(self._rngs[i], spec)
+            self._trajs[i] = episode.traj
+            self._params_list[i] = episode.params
+            if state is not None:
+                self._set_state(episode.x0, state if state.ndim == 1 else state[i],
+                                episode.params)  # fmt: skip
+            self._states[i] = episode.x0
+            self._rng_state[i] = episode.seed
+            self._gust[i] = episode.gust
+            self._bias[i] = episode.bias
         self._k[mask] = 0
 
     def _update_episode_rows(self, mask: FloatArray) -> None:
-        """After an autoreset: writes the new members' waypoints and parameters in place.
-
-        Shared references need nothing; a ``_ListTrajectory`` holds ``self._trajs`` itself;
-        the batched parameter arrays are the ones the rhs holds, so row writes reach it.
-        """
+        """After an autoreset: writes the new members' waypoints and parameters in place."""
         rows = np.flatnonzero(mask)
         if isinstance(self._batched_traj, RandomWaypoints):
             for i in rows:
                 self._batched_traj.waypoints[i] = self._trajs[i].waypoints  # type: ignore[attr-defined]
+        elif isinstance(self._batched_traj, _ListTrajectory):
+            pass  # holds self._trajs itself
+        elif self._batched_traj is None and any(self._trajs[i] is not self._trajs[0] for i in rows):
+            self._refresh_episode_tables()  # an autoreset left a per-reset trajectory
+            return
         if self.param_randomization > 0:
-            for name, values in self._batched_params.items():
-                for i in rows:
-                    values[i] = getattr(self._params_list[i], name)
+            for i in rows:
+                self._P[i] = physics.pack_params(self._params_list[i])
 
     def _refresh_episode_tables(self) -> None:
         """Builds the batched reference source and, if randomised, batched parameters."""
@@ -446,15 +645,19 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         else:
             self._batched_traj = _ListTrajectory(self._trajs)
         if self.param_randomization > 0:
-            self._batched_params = {
-                f.name: np.array([getattr(p, f.name) for p in self._params_list])
-                for f in fields(self.params)
-                if f.name in self.vehicle.randomized_fields
-            }
-            vehicle = self.vehicle.with_params(self.params.replace(**self._batched_params))
-            self._rhs, self._saturate = vehicle.rhs, vehicle.saturate
+            self._P = np.stack([physics.pack_params(p) for p in self._params_list])
+            vehicle = self.vehicle.with_params(
+                self.params.replace(
+                    **{
+                        name: np.array([getattr(p, name) for p in self._params_list])
+                        for name in self.vehicle.randomized_fields
+                    }
+                )
+            )
+            if self._custom_rhs is None:
+                self._rhs = vehicle.rhs
         else:
-            self._saturate = self.vehicle.saturate
+            self._P = self._P0
 
     def _references(self) -> FloatArray:
         if self._batched_traj is None:
@@ -466,42 +669,50 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             return refs
         return self._batched_traj(self._k * self.dt)
 
-    def _batch_noise(self, shape: tuple[int, ...]) -> FloatArray:
-        """Standard normal noise, member i drawn from member i's generator."""
-        return np.stack([rng.standard_normal(shape[1:]) for rng in self._rngs])
-
     def step(
         self, actions: Any
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, dict[str, Any]]:
         """Steps every member; members that ended last step are reset instead (NEXT_STEP)."""
         if not self._was_reset:
             raise gym.error.ResetNeeded("call reset() before step() on a vector env")
-        u_cmd = self._to_physical(actions, (self.num_envs,))
-        resetting = self._needs_reset.copy()
-        u = self._saturate(u_cmd)
-        new_states = rk4_step(self._rhs, self._states, u, self.dt, self.substeps)
-        self._states = np.where(resetting[:, None], self._states, new_states)
-        self._k += 1
+        a = actions if isinstance(actions, np.ndarray) else np.asarray(actions, dtype=np.float64)
+        expected = (self.num_envs,) + self._u_low.shape
+        if a.shape != expected:
+            raise ValueError(f"action must have shape {expected}, got {a.shape}")
+        resetting = self._needs_reset
         if resetting.any():
             self._reset_members(resetting)
             self._update_episode_rows(resetting)
+            self._k[~resetting] += 1
+        else:
+            self._k += 1
         refs = self._references()
-        terminated = out_of_bounds(self._states, self._x_low, self._x_high) & ~resetting
-        clean = self.vehicle.observe(self._states, refs)
-        reward = tracking_reward(clean, self.vehicle.cost_weights)
-        reward = np.where(terminated | resetting, 0.0, reward)
-        obs = self._finish_obs(clean, self._batch_noise, bool(terminated.any()))
+        obs, reward, end, u, u_cmd = self._advance(
+            self._states, a, refs, self._P, self._rng_state, self._gust, self._bias,
+            ~resetting, self._rhs,
+        )  # fmt: skip
+        terminated = end & ~resetting
+        reward[resetting] = 0.0
         if self.max_episode_steps is not None:
             truncated = (self._k >= self.max_episode_steps) & ~resetting
         else:
             truncated = np.zeros(self.num_envs, dtype=bool)
+        if self._delay:
+            self._history[:, :-1] = self._history[:, 1:]
+            self._history[:, -1] = obs
+            if resetting.any():
+                self._history[resetting] = obs[resetting, None, :]
+            obs = self._history[:, 0].copy()
         self._needs_reset = terminated | truncated
         info = {
-            "state": self._states.copy(),
+            "state": self._states[:, : self._n].copy(),
             "reference": refs,
             "action": u,
+            "commanded": u_cmd,
             "time": self._k * self.dt,
         }
+        if self._rotor_state:
+            info["rotor_thrusts"] = self._states[:, self._n :].copy()
         return obs, reward, terminated, truncated, info
 
     def render(self) -> FloatArray | None:
@@ -511,9 +722,21 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         from quad_envs.rendering import QuadRenderer
 
         if getattr(self, "_renderer", None) is None:
-            self._renderer = QuadRenderer(self.vehicle, "rgb_array")
+            self._renderer = QuadRenderer(self.vehicle, "rgb_array", self.metadata)
         refs = self._trajs[0](self._t_table[: int(self._k[0]) + 1])
-        return self._renderer.draw(self._states[0], self._states[:1], refs, self._k[0] * self.dt)
+        return self._renderer.draw(
+            self._states[0, : self._n], self._states[:1, : self._n], refs, self._k[0] * self.dt
+        )
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        state["_kernels"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._kernels = _kernels_of(self)
 
 
 class _ListTrajectory(Reference):

@@ -13,6 +13,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from quad_envs.types import FloatArray
 
 Controller = Callable[[FloatArray, FloatArray], FloatArray]
@@ -117,6 +119,11 @@ class Vehicle:
     def n_inputs(self) -> int:
         """Number of inputs."""
         return len(self.input_names)
+
+    @property
+    def n_rotors(self) -> int:
+        """Number of rotors (the mixer's columns)."""
+        return int(np.asarray(self.params.mixer).shape[1])
 
     @property
     def angle_indices(self) -> tuple[int, ...]:

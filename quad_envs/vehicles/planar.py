@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from quad_envs import dynamics
+from quad_envs import dynamics, physics
 from quad_envs.controllers import PlanarPD
 from quad_envs.params import PAPER_PLANAR, PlanarQuadParams
 from quad_envs.tasks import COST_WEIGHTS as W
@@ -91,7 +91,7 @@ PLANAR = Vehicle(
     obs_bounds=planar_obs_bounds,
     init_scale=np.array([0.5, 0.5, 0.3, 0.5, 0.5, 1.0]),
     action_bounds=planar_action_bounds,
-    randomized_fields=("mass", "Ixx"),
+    randomized_fields=("mass", "Ixx", *physics.EFFECT_FIELDS),
     library=planar_library,
     rotor_points=planar_rotor_points,
     views=(View((0, 1), ("y [m]", "z [m]")),),

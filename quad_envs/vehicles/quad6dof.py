@@ -6,7 +6,7 @@ import itertools
 
 import numpy as np
 
-from quad_envs import dynamics
+from quad_envs import dynamics, physics
 from quad_envs.controllers import Quad6DOFPD
 from quad_envs.params import PAPER_6DOF, Quad6DOFParams
 from quad_envs.tasks import COST_WEIGHTS as W
@@ -62,14 +62,9 @@ def quad6dof_obs_bounds(volume: FlightVolume) -> tuple[FloatArray, FloatArray]:
 
 
 def quad6dof_action_bounds(params: Quad6DOFParams) -> tuple[FloatArray, FloatArray]:
-    """Box of commandable [u1, u2, u3, u4] from the rotor limits through the mixer."""
-    f_lo, f_hi = params.rotor_force_min, params.rotor_force_max
-    moment = (f_hi - f_lo) * params.arm_length
-    yaw = 2 * (f_hi - f_lo) * params.gamma
-    return (
-        np.array([4 * f_lo, -moment, -moment, -yaw]),
-        np.array([4 * f_hi, moment, moment, yaw]),
-    )
+    """Box of commandable [u1, u2, u3, u4]: each mixer row's range over the rotor limits."""
+    ends = params.mixer[:, :, None] * np.array([params.rotor_force_min, params.rotor_force_max])
+    return ends.min(axis=2).sum(axis=1), ends.max(axis=2).sum(axis=1)
 
 
 def quad6dof_library() -> list[str]:
@@ -149,7 +144,7 @@ QUAD6DOF = Vehicle(
     obs_bounds=quad6dof_obs_bounds,
     init_scale=np.array([0.5, 0.5, 0.5, 0.3, 0.3, 0.5, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0]),
     action_bounds=quad6dof_action_bounds,
-    randomized_fields=("mass", "Jxx", "Jyy", "Jzz"),
+    randomized_fields=("mass", "Jxx", "Jyy", "Jzz", *physics.EFFECT_FIELDS),
     library=quad6dof_library,
     rotor_points=quad6dof_rotor_points,
     views=(View((1, 2), ("y [m]", "z [m]")), View((0, 1), ("x [m]", "y [m]"))),
