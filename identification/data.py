@@ -1,13 +1,21 @@
-"""Trajectories of (t, states, inputs): validation, CSV/NPZ I/O and rollout collection.
+"""Trajectories of (t, states, inputs): validation, real-log cleaning, CSV/NPZ I/O.
 
-``u[k]`` is the input *applied* (held) over [t_k, t_k+1): for environment rollouts this is
-the saturated action from ``info["action"]``. The authors' CSV records the commanded input,
-which equals the applied one wherever the rotors do not saturate (all of case C).
+``u[k]`` is the input *applied* (held) over [t_k, t_k+1). Time stamps must increase but need
+not be uniform: the RK4 formulation of :mod:`identification.fit` uses each row's own step.
+Raw logs (repeated stale rows, gaps, outliers) go through :func:`clean` first, which splits
+them into clean segments and reports what it dropped.
+
+Variable names come from the data: a CSV header (or ``columns=`` for a headerless file) and,
+optionally, explicit ``states=`` / ``inputs=``. Without them the names of a preset vehicle
+(``planar``, ``quad6dof``) are recognised; otherwise columns ``u1, u2, ...`` are the inputs
+and every other column a state. Columns named ``_`` or ending in ``_ref`` / ``_cmd`` are
+ignored (references and commanded inputs written by ``quad-sindy simulate``).
 """
 
 from __future__ import annotations
 
 import io
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,9 +23,25 @@ from typing import Any
 
 import numpy as np
 
+from quad_envs.dynamics import (
+    PLANAR_INPUT_NAMES,
+    PLANAR_STATE_NAMES,
+    QUAD6DOF_INPUT_NAMES,
+    QUAD6DOF_STATE_NAMES,
+)
 from quad_envs.fileio import atomic_write_bytes, write_csv
-from quad_envs.simulate import ClosedLoopRun
-from quad_envs.vehicles import get_vehicle
+
+PRESET_VARIABLES: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "planar": (PLANAR_STATE_NAMES, PLANAR_INPUT_NAMES),
+    "quad6dof": (QUAD6DOF_STATE_NAMES, QUAD6DOF_INPUT_NAMES),
+}
+"""State and input names of the preset vehicles."""
+
+PRESET_ANGLES: dict[str, tuple[str, ...]] = {
+    "planar": ("phi",),
+    "quad6dof": ("phi", "theta", "psi"),
+}
+"""Angle states of the preset vehicles (the variables of Fourier terms)."""
 
 
 @dataclass
@@ -25,7 +49,7 @@ class Trajectory:
     """One sampled trajectory.
 
     Attributes:
-        t: Uniformly spaced, increasing times, shape (N,).
+        t: Strictly increasing times, shape (N,); steps may vary (each row's own step is used).
         x: States, shape (N, n).
         u: Inputs held over each step, shape (N, m).
         state_names: Names of the n states.
@@ -51,22 +75,46 @@ class Trajectory:
 
     @property
     def dt(self) -> float:
-        """The sample period [s]."""
-        return float(self.t[1] - self.t[0])
+        """The median sample period [s] (the period itself on a uniform grid)."""
+        return float(np.median(np.diff(self.t)))
+
+    @property
+    def steps(self) -> np.ndarray:
+        """Each row's own step t[k+1] - t[k], shape (N - 1,)."""
+        return np.diff(self.t)
+
+    @property
+    def uniform(self) -> bool:
+        """Whether the time grid is uniform (to 1e-6 relative)."""
+        steps = self.steps
+        return bool(np.abs(steps - steps.mean()).max() <= 1e-6 * steps.mean() + 1e-12)
 
     def __len__(self) -> int:
         return self.t.size
 
+    def slice(self, start: int, stop: int) -> Trajectory:
+        """Rows [start, stop) as a new trajectory (same names, meta copied)."""
+        refs = None if self.refs is None else self.refs[start:stop]
+        return Trajectory(
+            self.t[start:stop], self.x[start:stop], self.u[start:stop], self.state_names,
+            self.input_names, refs, dict(self.meta),
+        )  # fmt: skip
+
     @classmethod
-    def from_run(cls, run: ClosedLoopRun, inputs: str = "applied", **meta: Any) -> Trajectory:
-        """From a closed-loop simulation (applied inputs by default)."""
+    def from_run(cls, run: Any, inputs: str = "applied", **meta: Any) -> Trajectory:
+        """From a closed-loop simulation result (applied inputs by default).
+
+        ``run`` needs ``t``, ``states``, ``applied``, ``commanded``, ``refs`` and a
+        ``vehicle`` (or ``system``) with ``state_names`` and ``input_names``.
+        """
         u = run.applied if inputs == "applied" else run.commanded
-        names = (run.vehicle.state_names, run.vehicle.input_names)
+        owner = getattr(run, "vehicle", None) or run.system
+        names = (owner.state_names, owner.input_names)
         return cls(run.t, run.states, u, *names, refs=run.refs, meta=meta)
 
 
 def validate(traj: Trajectory) -> None:
-    """Raises ValueError naming the problem: shapes, NaN/inf, time grid, names."""
+    """Raises ValueError naming the problem: shapes, NaN/inf, time order, names."""
     t, x, u = traj.t, traj.x, traj.u
     if t.ndim != 1 or t.size < 3:
         raise ValueError(f"t must be 1-D with at least 3 samples, got shape {t.shape}")
@@ -78,6 +126,9 @@ def validate(traj: Trajectory) -> None:
         raise ValueError(f"x has {x.shape[1]} columns but {len(traj.state_names)} state names")
     if u.shape[1] != len(traj.input_names):
         raise ValueError(f"u has {u.shape[1]} columns but {len(traj.input_names)} input names")
+    names = [*traj.state_names, *traj.input_names]
+    if len(set(names)) != len(names):
+        raise ValueError(f"state and input names must be distinct, got {names}")
     for name, arr in (("t", t), ("x", x), ("u", u)):
         bad = ~np.isfinite(arr)
         if bad.any():
@@ -85,54 +136,255 @@ def validate(traj: Trajectory) -> None:
             raise ValueError(f"{name} contains NaN or infinite values (first at sample {row})")
     steps = np.diff(t)
     if np.any(steps <= 0):
-        raise ValueError(f"time must be strictly increasing (sample {int(np.argmin(steps)) + 1})")
-    if np.abs(steps - steps.mean()).max() > 1e-6 * max(steps.mean(), 1e-12) + 1e-9:
         raise ValueError(
-            f"time must be uniformly spaced: steps range from {steps.min():g} to {steps.max():g} s"
+            f"time must be strictly increasing (sample {int(np.argmin(steps)) + 1}); "
+            "clean() drops repeated time stamps"
         )
 
 
-def _split_columns(
-    columns: Sequence[str], system: str
-) -> tuple[int, list[int], list[int], list[str], list[str]]:
-    sys_ = get_vehicle(system)
-    known_states, known_inputs = set(sys_.state_names), set(sys_.input_names)
-    if "t" not in columns:
-        raise ValueError(f"columns must include 't', got {list(columns)}")
-    ignored = set(sys_.ref_names) | {f"{name}_cmd" for name in sys_.input_names} | {"_"}
-    unknown = [c for c in columns if c not in known_states | known_inputs | ignored | {"t"}]
-    if unknown:
-        valid = ["t", *sys_.state_names, *sys_.input_names, "_", *sys_.ref_names]
-        raise ValueError(f"unknown column name(s) {unknown}; valid names: {valid}")
-    states = [c for c in sys_.state_names if c in columns]
-    inputs = [c for c in sys_.input_names if c in columns]
-    if not states or not inputs:
-        raise ValueError(f"columns name no states or no inputs of the {system} system")
-    return (
-        list(columns).index("t"),
-        [list(columns).index(c) for c in states],
-        [list(columns).index(c) for c in inputs],
-        states,
-        inputs,
-    )
+@dataclass
+class CleanReport:
+    """What :func:`clean` changed.
+
+    Attributes:
+        rows_in: Rows given.
+        stale_rows: Rows dropped because they repeat the previous row's states (or time).
+        outlier_rows: Rows dropped as outliers (robust z-score of the state).
+        gaps: Time gaps (step > ``gap_factor`` x median step) where the log was split.
+        short_segments: Segments dropped as too short.
+        segments: Number of segments returned.
+        rows_out: Rows returned.
+        jitter: Largest relative deviation of a step from the median step.
+    """
+
+    rows_in: int = 0
+    stale_rows: int = 0
+    outlier_rows: int = 0
+    gaps: int = 0
+    short_segments: int = 0
+    segments: int = 0
+    rows_out: int = 0
+    jitter: float = 0.0
+
+    def merge(self, other: CleanReport) -> CleanReport:
+        """Sum of two reports (jitter: the larger)."""
+        out = CleanReport()
+        for name in self.__dataclass_fields__:
+            a, b = getattr(self, name), getattr(other, name)
+            setattr(out, name, max(a, b) if name == "jitter" else a + b)
+        return out
+
+    def summary(self) -> str:
+        """One line for users."""
+        return (
+            f"{self.rows_in} rows -> {self.rows_out} rows in {self.segments} segment(s); "
+            f"dropped {self.stale_rows} stale/repeated, {self.outlier_rows} outlier rows, "
+            f"{self.short_segments} short segment(s); split at {self.gaps} gap(s); "
+            f"time-step jitter {100 * self.jitter:.1f} % (each row's own step is used)"
+        )
+
+
+def clean(
+    t: np.ndarray,
+    x: np.ndarray,
+    u: np.ndarray,
+    state_names: Sequence[str],
+    input_names: Sequence[str],
+    gap_factor: float = 3.0,
+    outlier_z: float = 12.0,
+    min_rows: int = 20,
+) -> tuple[list[Trajectory], CleanReport]:
+    """Splits a raw log into clean segments: stale rows, outliers and gaps removed.
+
+    A row is *stale* when its time does not advance, or when its states repeat the previous
+    row's exactly while the vehicle moves before and after (a logger that re-sent an old
+    sample; repeats at rest are kept). A row is an *outlier* when a state is
+    further than ``outlier_z`` robust standard deviations (1.4826 MAD over the log) from
+    the straight line through its two neighbours. Dropped rows and time gaps longer than
+    ``gap_factor`` median steps split the log, because the input held over a missing step is
+    unknown; segments shorter than ``min_rows`` are dropped. Jittery steps are kept: the fit
+    uses each row's own step.
+
+    Args:
+        t: Raw time stamps, shape (N,) (repeats and steps back are dropped as stale).
+        x: Raw states, shape (N, n).
+        u: Raw inputs, shape (N, m).
+        state_names: Names of the states.
+        input_names: Names of the inputs.
+        gap_factor: Steps longer than this many median steps are gaps.
+        outlier_z: Robust z-score above which a row is an outlier.
+        min_rows: Shortest segment kept.
+
+    Returns:
+        The clean segments and the report.
+    """
+    t, x, u = (np.asarray(a, dtype=np.float64) for a in (t, x, u))
+    x, u = x.reshape(t.size, -1), u.reshape(t.size, -1)
+    finite = np.isfinite(t) & np.isfinite(x).all(axis=1) & np.isfinite(u).all(axis=1)
+    report = CleanReport(rows_in=t.size)
+    keep = np.ones(t.size, dtype=bool)
+    stale = np.zeros(t.size, dtype=bool)
+    same = np.zeros(t.size, dtype=bool)
+    same[1:] = np.all(x[1:] == x[:-1], axis=1)  # row k repeats row k-1
+    moving_before = np.concatenate([[False, False], ~same[1:-1]])
+    moving_after = np.concatenate([~same[1:], [False]])
+    # a repeat inside motion is a logger re-sending; repeats at rest are real (equilibrium)
+    stale[1:] = (np.diff(t) <= 0) | (same & moving_before & moving_after)[1:]
+    stale[1:] |= t[1:] <= np.maximum.accumulate(t)[:-1]  # any step back in time
+    keep &= ~stale & finite
+    report.stale_rows = int((stale | ~finite).sum())
+    idx = np.flatnonzero(keep)
+    outliers = np.zeros(t.size, dtype=bool)
+    if idx.size >= 5:
+        xs, ts = x[idx], t[idx]
+        weight = ((ts[1:-1] - ts[:-2]) / (ts[2:] - ts[:-2]))[:, None]
+        resid = xs[1:-1] - ((1 - weight) * xs[:-2] + weight * xs[2:])  # off the neighbours' line
+        mad = 1.4826 * np.median(np.abs(resid - np.median(resid, axis=0)), axis=0)
+        mad = np.where(mad > 0, mad, np.inf)
+        step = np.diff(ts)
+        near_gap = np.maximum(step[:-1], step[1:]) > gap_factor * np.median(step)
+        bad = np.any(np.abs(resid) > outlier_z * mad, axis=1) & ~near_gap  # gaps split anyway
+        # an outlier at k disturbs the residuals of k-1 and k+1 too (half as much): keep the peak
+        z = np.max(np.abs(resid) / mad, axis=1)
+        peak = bad & (z >= np.concatenate([[0], z[:-1]])) & (z >= np.concatenate([z[1:], [0]]))
+        outliers[idx[1:-1][peak]] = True
+    keep &= ~outliers
+    report.outlier_rows = int(outliers.sum())
+    # split wherever a row was dropped or the step is a gap
+    rows = np.flatnonzero(keep)
+    if rows.size == 0:
+        raise ValueError("no rows left after dropping stale rows and outliers")
+    steps = np.diff(t[rows])
+    median = float(np.median(steps)) if steps.size else 0.0
+    gap = steps > gap_factor * median
+    dropped_between = np.diff(rows) > 1
+    report.gaps = int(gap.sum())
+    cuts = np.flatnonzero(gap | dropped_between) + 1
+    segments = []
+    for part in np.split(rows, cuts):
+        if part.size < max(min_rows, 3):
+            report.short_segments += 1
+            continue
+        seg = Trajectory(t[part], x[part], u[part], state_names, input_names)
+        segments.append(seg)
+        dev = np.abs(seg.steps / median - 1.0).max() if median else 0.0
+        report.jitter = max(report.jitter, float(dev))
+    if not segments:
+        raise ValueError(
+            f"no segment of at least {min_rows} clean rows (log has {t.size} rows with "
+            f"{report.gaps} gaps): record longer uninterrupted stretches"
+        )
+    report.segments = len(segments)
+    report.rows_out = int(sum(len(s) for s in segments))
+    return segments, report
+
+
+def _ignored(name: str) -> bool:
+    return name == "_" or name.endswith("_ref") or name.endswith("_cmd")
+
+
+def resolve_names(
+    columns: Sequence[str],
+    system: str | None = None,
+    states: Sequence[str] | None = None,
+    inputs: Sequence[str] | None = None,
+    time: str = "t",
+) -> tuple[list[str], list[str]]:
+    """Which columns are states and which inputs.
+
+    Args:
+        columns: All column names (a header).
+        system: A preset (``planar``/``quad6dof``) whose names select the columns, or None.
+        states: Explicit state columns (the rest, if ``inputs`` is given too, is ignored).
+        inputs: Explicit input columns.
+        time: Name of the time column.
+
+    Returns:
+        State names and input names, in the order of ``states``/``inputs`` or of the preset.
+
+    Raises:
+        ValueError: Unknown or missing names, or nothing to identify.
+    """
+    cols = list(columns)
+    if time not in cols:
+        raise ValueError(f"columns must include the time column {time!r}, got {cols}")
+    if len(set(cols) - {"_"}) != len([c for c in cols if c != "_"]):
+        raise ValueError(f"duplicate column names in {cols}")
+    if system is not None and system not in PRESET_VARIABLES:
+        raise ValueError(f"unknown system {system!r}; valid choices: {', '.join(PRESET_VARIABLES)}")
+    if system is not None and states is None and inputs is None:
+        known_s, known_i = PRESET_VARIABLES[system]
+        unknown = [c for c in cols if c not in {*known_s, *known_i, time} and not _ignored(c)]
+        if unknown:
+            valid = [time, *known_s, *known_i, "_", "*_ref", "*_cmd"]
+            raise ValueError(f"unknown column name(s) {unknown}; valid names: {valid}")
+        st = [c for c in known_s if c in cols]
+        inp = [c for c in known_i if c in cols]
+    else:
+        candidates = [c for c in cols if c != time and not _ignored(c)]
+        if inputs is None:
+            inp = [c for c in candidates if re.fullmatch(r"u\d+", c)]
+        else:
+            inp = list(inputs)
+        st = list(states) if states is not None else [c for c in candidates if c not in inp]
+        missing = [c for c in [*st, *inp] if c not in cols]
+        if missing:
+            raise ValueError(f"column(s) {missing} not in the data; columns are {cols}")
+        both = set(st) & set(inp)
+        if both:
+            raise ValueError(f"column(s) {sorted(both)} named as both state and input")
+    if not st or not inp:
+        raise ValueError(
+            f"no states or no inputs among the columns {cols}: name them with states=/inputs= "
+            "(--states, --inputs)"
+        )
+    return st, inp
 
 
 def read_csv(
-    path: str | Path, columns: Sequence[str] | None = None, system: str = "planar"
+    path: str | Path,
+    columns: Sequence[str] | None = None,
+    system: str | None = "planar",
+    states: Sequence[str] | None = None,
+    inputs: Sequence[str] | None = None,
+    time: str = "t",
 ) -> Trajectory:
     """Reads a CSV trajectory.
 
     With a header (``t,y,z,...``), columns are found by name. A headerless file needs
-    ``columns`` naming every column in order; ``_`` (and reference names) mark ignored ones.
+    ``columns`` naming every column in order; ``_`` marks ignored ones. See
+    :func:`resolve_names` for how states and inputs are chosen.
 
     Args:
         path: CSV file.
         columns: Column names in order, for headerless files.
-        system: ``planar`` or ``quad6dof``: which names are states and inputs.
+        system: Preset whose names pick states and inputs (None: from the names alone).
+        states: Explicit state columns.
+        inputs: Explicit input columns.
+        time: Name of the time column.
 
     Returns:
-        The trajectory.
+        The trajectory (not cleaned: see :func:`clean`).
     """
+    cols, data, st, inp = _read_table(path, columns, system, states, inputs, time)
+    return Trajectory(
+        data[:, cols.index(time)],
+        data[:, [cols.index(c) for c in st]],
+        data[:, [cols.index(c) for c in inp]],
+        st,
+        inp,
+        meta={"source": str(path)},
+    )
+
+
+def _read_table(
+    path: str | Path,
+    columns: Sequence[str] | None,
+    system: str | None,
+    states: Sequence[str] | None,
+    inputs: Sequence[str] | None,
+    time: str,
+) -> tuple[list[str], np.ndarray, list[str], list[str]]:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such data file: {path}")
@@ -151,10 +403,39 @@ def read_csv(
         raise ValueError(f"{path}: not a numeric CSV ({exc})") from None
     if data.shape[1] != len(columns):
         raise ValueError(f"{path} has {data.shape[1]} columns but {len(columns)} names were given")
-    ti, si, ui, states, inputs = _split_columns(columns, system)
-    return Trajectory(
-        data[:, ti], data[:, si], data[:, ui], states, inputs, meta={"source": str(path)}
-    )
+    st, inp = resolve_names(columns, system, states, inputs, time)
+    return list(columns), data, st, inp
+
+
+def read_log(
+    path: str | Path,
+    columns: Sequence[str] | None = None,
+    system: str | None = None,
+    states: Sequence[str] | None = None,
+    inputs: Sequence[str] | None = None,
+    time: str = "t",
+) -> tuple[list[Trajectory], CleanReport]:
+    """Reads a raw CSV log and :func:`clean` s it: segments plus a report of what was dropped.
+
+    Args:
+        path: CSV file (arguments as :func:`read_csv`).
+        columns: Column names in order, for headerless files.
+        system: Preset whose names pick states and inputs (None: from the names alone).
+        states: Explicit state columns.
+        inputs: Explicit input columns.
+        time: Name of the time column.
+
+    Returns:
+        Clean segments and the report.
+    """
+    cols, data, st, inp = _read_table(path, columns, system, states, inputs, time)
+    segs, report = clean(
+        data[:, cols.index(time)], data[:, [cols.index(c) for c in st]],
+        data[:, [cols.index(c) for c in inp]], st, inp,
+    )  # fmt: skip
+    for seg in segs:
+        seg.meta["source"] = str(path)
+    return segs, report
 
 
 def write_trajectory_csv(path: str | Path, traj: Trajectory) -> Path:
@@ -195,13 +476,30 @@ def load_npz(path: str | Path) -> list[Trajectory]:
 
 
 def load_data(
-    paths: Sequence[str | Path], columns: Sequence[str] | None = None, system: str = "planar"
-) -> list[Trajectory]:
-    """Reads CSV and NPZ files into one list of trajectories."""
+    paths: Sequence[str | Path],
+    columns: Sequence[str] | None = None,
+    system: str | None = "planar",
+    states: Sequence[str] | None = None,
+    inputs: Sequence[str] | None = None,
+) -> tuple[list[Trajectory], CleanReport]:
+    """Reads CSV logs (cleaned, see :func:`read_log`) and NPZ archives into clean segments.
+
+    Returns:
+        The segments and the merged cleaning report.
+    """
     trajs: list[Trajectory] = []
+    report = CleanReport()
     for path in paths:
         if str(path).endswith(".npz"):
-            trajs.extend(load_npz(path))
+            for tr in load_npz(path):
+                segs, rep = clean(tr.t, tr.x, tr.u, tr.state_names, tr.input_names)
+                trajs.extend(segs)
+                report = report.merge(rep)
         else:
-            trajs.append(read_csv(path, columns, system))
-    return trajs
+            segs, rep = read_log(path, columns, system, states, inputs)
+            trajs.extend(segs)
+            report = report.merge(rep)
+    names = {(tr.state_names, tr.input_names) for tr in trajs}
+    if len(names) > 1:
+        raise ValueError(f"the files name different variables: {sorted(names)}")
+    return trajs, report

@@ -1,38 +1,52 @@
-"""SINDy-with-control fitting: regression formulations, pysindy optimizers, lambda scan.
+"""SINDy-with-control fitting: regression formulations, pysindy optimizers, identifiability.
 
 Formulations (``derivative=``), each giving a linear problem Y ~ Theta Xi^T:
 
 ``forward``
-    The paper's: Y_k = (x_{k+1} - x_k) / dt against Theta(x_k, u_k). On zero-order-hold
+    The paper's: Y_k = (x_{k+1} - x_k) / dt_k against Theta(x_k, u_k). On zero-order-hold
     data this is the mean slope over the step, biased by O(dt).
 ``rk4`` (default)
     Integrator-consistent: the same Y_k against the RK4 average of Theta over the stages
     s1..s4 of the step from x_k with u_k held, the stages computed with the current
     estimate; a few fixed-point passes. Data made by RK4 at the sample step are matched
-    exactly (round-off); finer or exact integration leaves an O(dt^4) error.
+    exactly (round-off); finer or exact integration leaves an O(dt^4) error. Each row uses
+    its own step dt_k, so jittery time stamps need no resampling.
 ``rk4`` with ``window=w > 1``
-    The integral form of the same: (x_{k+w} - x_k) / (w dt) against the mean of the stage
-    averages over the window. Averaging w steps damps measurement noise (weak-form-like).
-``central`` / ``smoothed``
-    pysindy's FiniteDifference (order 2) / SmoothedFiniteDifference at each sample against
-    Theta(x_k, u_k): for comparison (central differences across input jumps fail).
+    The integral form of the same: (x_{k+w} - x_k) / (t_{k+w} - t_k) against the
+    step-weighted mean of the stage averages over the window. Averaging w steps damps
+    measurement noise (weak-form-like).
+``central`` / ``smoothed`` / a pysindy differentiation object
+    pysindy's FiniteDifference (order 2) / SmoothedFiniteDifference (or the object given),
+    called through its public ``__call__`` at each sample, against Theta(x_k, u_k).
 
-Columns of Theta are scaled to unit RMS and each target to unit RMS before the optimizer,
-so one threshold ``lam`` means the same for every term: a term is kept when its typical
-contribution exceeds roughly ``lam`` times the typical derivative. After selection the
-support is refitted by least squares (debiasing).
+The regression is carried by its normal equations (:class:`Gram`): Theta^T Theta, Theta^T Y
+and Y^T Y summed over chunks of rows, so memory does not grow with the data, folds and
+bootstrap bags are sums of per-chunk Grams, and a pysindy optimizer sees a p x p problem
+with the same least-squares objective (``A = S^1/2 V^T`` from ``Theta^T Theta = V S V^T``).
+Columns of Theta are scaled to unit RMS and each target to unit RMS before the optimizer, so
+one threshold ``lam`` means the same for every term. After selection the support is refitted
+by least squares (debiasing).
+
+Before any fit, :func:`check_identifiable` refuses data on which the library cannot be
+identified (too few rows, a constant input, exactly collinear or all-zero columns) with a
+one-line ValueError that names the terms and the data that would fix it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import dataclasses
+import warnings
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import pysindy as ps
+from pysindy.differentiation import BaseDifferentiation
+from pysindy.optimizers import BaseOptimizer
+from sklearn.base import clone
 
 from identification.data import Trajectory
-from identification.features import compile_features, compile_rhs
+from identification.features import compile_features, compile_rhs, parse_term, term_name
 from identification.model import IdentifiedModel
 
 DERIVATIVES = ("rk4", "forward", "central", "smoothed")
@@ -40,40 +54,435 @@ OPTIMIZERS = ("sr3", "stlsq", "ensemble")
 DEFAULT_LAMBDAS = tuple(np.round(np.concatenate([[0.0], np.logspace(-6, 0, 25)]), 12))
 """Default scan grid for our scaled threshold (0 and 25 log-spaced values from 1e-6 to 1)."""
 
+SINGULAR_TOL = 1e-12
+"""Ratio of the smallest to the largest singular value of the column-normalised library
+below which its columns are exactly collinear on the data (float64 round-off level)."""
 
-@dataclass
+CHUNK_ELEMENTS = 4_000_000
+"""Rows x features per chunk when building the normal equations (about 32 MB a stage)."""
+
+
+@dataclass(frozen=True)
 class FitConfig:
-    """How to fit.
+    """How to fit (frozen: change it with ``dataclasses.replace``).
 
     Attributes:
-        derivative: One of :data:`DERIVATIVES`.
-        optimizer: One of :data:`OPTIMIZERS`.
+        derivative: One of :data:`DERIVATIVES`, or a pysindy differentiation object
+            (e.g. ``ps.SmoothedFiniteDifference()``), called at each sample.
+        optimizer: One of :data:`OPTIMIZERS`, or a pysindy optimizer object. A string uses
+            ``lam`` as its scaled threshold; an object is cloned and used with its own
+            settings (its ``threshold`` is set to ``lam`` when ``set_lam`` is true).
         lam: Scaled sparsity threshold (0: dense least squares).
         window: Steps per row of the integral form (``rk4`` and ``forward``).
         iterations: Fixed-point passes of the ``rk4`` formulation.
         scale: Scale columns and targets to unit RMS.
         n_models: Ensemble size (``ensemble``).
         seed: Ensemble bagging seed.
+        set_lam: Whether ``lam`` overrides an optimizer object's ``threshold``.
     """
 
-    derivative: str = "rk4"
-    optimizer: str = "sr3"
+    derivative: str | BaseDifferentiation = "rk4"
+    optimizer: str | BaseOptimizer = "sr3"
     lam: float = 1e-3
     window: int = 1
     iterations: int = 4
     scale: bool = True
     n_models: int = 20
     seed: int = 0
+    set_lam: bool = False
 
     def __post_init__(self) -> None:
-        if self.derivative not in DERIVATIVES:
+        if isinstance(self.derivative, str) and self.derivative not in DERIVATIVES:
             raise ValueError(f"unknown derivative {self.derivative!r}; valid: {DERIVATIVES}")
-        if self.optimizer not in OPTIMIZERS:
+        if not isinstance(self.derivative, str | BaseDifferentiation):
+            raise ValueError(
+                f"derivative must be a name or a pysindy object, not {self.derivative!r}"
+            )
+        if isinstance(self.optimizer, str) and self.optimizer not in OPTIMIZERS:
             raise ValueError(f"unknown optimizer {self.optimizer!r}; valid: {OPTIMIZERS}")
+        if not isinstance(self.optimizer, str | BaseOptimizer):
+            raise ValueError(
+                f"optimizer must be a name or a pysindy object, not {self.optimizer!r}"
+            )
         if not np.isfinite(self.lam) or self.lam < 0:
             raise ValueError(f"lambda must be a non-negative number, got {self.lam!r}")
         if self.window < 1:
             raise ValueError(f"window must be >= 1, got {self.window}")
+
+    @property
+    def label(self) -> dict[str, object]:
+        """JSON-safe description of the settings."""
+
+        def name(obj: object) -> str:
+            return obj if isinstance(obj, str) else type(obj).__name__
+
+        return {
+            "method": name(self.derivative), "optimizer": name(self.optimizer),
+            "lambda": self.lam, "window": self.window,
+        }  # fmt: skip
+
+
+# -- least-squares accumulator ---------------------------------------------------------
+@dataclass
+class Gram:
+    """A regression Y ~ Theta Xi^T reduced to the triangular factor of [Theta Y].
+
+    ``r_aug`` is the R of a QR factorisation of the stacked rows [Theta, Y]: its top-left
+    p x p block R has R^T R = Theta^T Theta, its top-right block z = Q^T Y, and column norms
+    equal those of Theta and Y. Least squares on (R, z) has the same objective as on the rows
+    up to a constant, with the conditioning of Theta (not squared as in Theta^T Theta).
+    Factors of disjoint row sets combine by stacking and re-factorising (folds, bags).
+
+    Attributes:
+        r_aug: Upper-triangular factor, shape (p + n, p + n) (fewer rows if fewer data rows).
+        p: Number of features.
+        rows: Number of data rows summed.
+    """
+
+    r_aug: np.ndarray
+    p: int
+    rows: int
+
+    @classmethod
+    def zeros(cls, p: int, n: int) -> Gram:
+        """The empty sum."""
+        return cls(np.zeros((0, p + n)), p, 0)
+
+    @classmethod
+    def from_rows(cls, theta: np.ndarray, y: np.ndarray) -> Gram:
+        """Factor of explicit rows."""
+        return cls(np.linalg.qr(np.hstack([theta, y]), mode="r"), theta.shape[1], theta.shape[0])
+
+    @classmethod
+    def stack(cls, parts: Sequence[Gram], weights: Sequence[float] | None = None) -> Gram:
+        """The factor of the union of the parts' rows (each row set weighted if given)."""
+        if weights is None:
+            weights = [1.0] * len(parts)
+        blocks = [np.sqrt(w) * g.r_aug for g, w in zip(parts, weights, strict=True) if w > 0]
+        rows = int(round(sum(g.rows * w for g, w in zip(parts, weights, strict=True))))
+        stacked = np.vstack(blocks) if blocks else parts[0].r_aug[:0]
+        return cls(np.linalg.qr(stacked, mode="r") if stacked.shape[0] else stacked,
+                   parts[0].p, rows)  # fmt: skip
+
+    def __add__(self, other: Gram) -> Gram:
+        return Gram.stack([self, other])
+
+    @property
+    def r(self) -> np.ndarray:
+        """R with R^T R = Theta^T Theta (rows padded to p)."""
+        return self._padded()[:, : self.p]
+
+    @property
+    def z(self) -> np.ndarray:
+        """Q^T Y, shape (p, n)."""
+        return self._padded()[:, self.p :]
+
+    def _padded(self) -> np.ndarray:
+        width = self.r_aug.shape[1]
+        out = np.zeros((self.p, width))
+        k = min(self.p, self.r_aug.shape[0])
+        out[:k] = self.r_aug[:k]
+        return out
+
+    @property
+    def col_norms(self) -> np.ndarray:
+        """Euclidean norms of the columns of Theta."""
+        return np.linalg.norm(self.r_aug[:, : self.p], axis=0)
+
+    @property
+    def y_norms(self) -> np.ndarray:
+        """Euclidean norms of the columns of Y."""
+        return np.linalg.norm(self.r_aug[:, self.p :], axis=0)
+
+
+def _window_mean(rows: np.ndarray, weights: np.ndarray, w: int) -> np.ndarray:
+    """Weighted means of w consecutive rows (all overlapping windows)."""
+    if w == 1:
+        return rows
+    c = np.concatenate([np.zeros((1, rows.shape[1])), np.cumsum(rows * weights[:, None], axis=0)])
+    cw = np.concatenate([[0.0], np.cumsum(weights)])
+    return (c[w:] - c[:-w]) / (cw[w:] - cw[:-w])[:, None]
+
+
+def _rk4_stage_theta(
+    theta: Callable, rhs: Callable, x: np.ndarray, u: np.ndarray, h: np.ndarray
+) -> np.ndarray:
+    """RK4 average of Theta over the stages of each step (input held, step h per row)."""
+    h = h[:, None]
+    k1 = rhs(x, u)
+    s2 = x + 0.5 * h * k1
+    k2 = rhs(s2, u)
+    s3 = x + 0.5 * h * k2
+    k3 = rhs(s3, u)
+    s4 = x + h * k3
+    return (theta(x, u) + 2 * theta(s2, u) + 2 * theta(s3, u) + theta(s4, u)) / 6.0
+
+
+def _differentiator(derivative: str | BaseDifferentiation) -> BaseDifferentiation:
+    if isinstance(derivative, BaseDifferentiation):
+        return derivative
+    if derivative == "central":
+        return ps.FiniteDifference(order=2)
+    return ps.SmoothedFiniteDifference()
+
+
+def iter_rows(
+    trajs: Sequence[Trajectory],
+    feature_names: Sequence[str],
+    derivative: str | BaseDifferentiation,
+    window: int = 1,
+    xi: np.ndarray | None = None,
+    chunk_rows: int | None = None,
+) -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+    """Yields (trajectory index, Theta rows, Y rows) chunk by chunk.
+
+    Args:
+        trajs: Data.
+        feature_names: Library.
+        derivative: A formulation name or a pysindy differentiation object.
+        window: Integral window (``rk4``/``forward``).
+        xi: Current coefficients for the ``rk4`` stage points (required for ``rk4``).
+        chunk_rows: Rows per chunk (default: about :data:`CHUNK_ELEMENTS` / features).
+
+    Yields:
+        Trajectory index, Theta (rows, p) and Y (rows, n) of one chunk.
+    """
+    names = (trajs[0].state_names, trajs[0].input_names)
+    theta = compile_features(feature_names, *names)
+    rhs = compile_rhs(feature_names, xi, *names) if xi is not None else None
+    if derivative == "rk4" and rhs is None:
+        raise ValueError("the rk4 formulation needs current coefficients (xi)")
+    step = chunk_rows or max(500, CHUNK_ELEMENTS // max(len(feature_names), 1))
+    for index, tr in enumerate(trajs):
+        if not isinstance(derivative, str) or derivative in ("central", "smoothed"):
+            dx = np.asarray(_differentiator(derivative)(tr.x, tr.t))
+            for s in range(0, len(tr), step):
+                yield index, theta(tr.x[s : s + step], tr.u[s : s + step]), dx[s : s + step]
+            continue
+        if len(tr) <= window:
+            raise ValueError(f"a trajectory of {len(tr)} samples is too short for window {window}")
+        n_rows = len(tr) - window
+        for s in range(0, n_rows, step):
+            stop = min(s + step, n_rows)  # window rows s..stop-1 use samples s..stop-1+window
+            x, u = tr.x[s : stop + window - 1], tr.u[s : stop + window - 1]
+            h = np.diff(tr.t[s : stop + window])
+            if derivative == "forward":
+                rows = theta(x, u)
+            else:
+                rows = _rk4_stage_theta(theta, rhs, x, u, h)
+            y = (tr.x[s + window : stop + window] - tr.x[s:stop]) / (
+                tr.t[s + window : stop + window] - tr.t[s:stop]
+            )[:, None]
+            yield index, _window_mean(rows, h, window), y
+
+
+def regression_rows(
+    trajs: Sequence[Trajectory],
+    feature_names: Sequence[str],
+    derivative: str | BaseDifferentiation,
+    window: int = 1,
+    xi: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Stacks (Theta, Y) over trajectories for one formulation (see :func:`iter_rows`)."""
+    parts = list(iter_rows(trajs, feature_names, derivative, window, xi))
+    return np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts])
+
+
+def grams(
+    trajs: Sequence[Trajectory],
+    feature_names: Sequence[str],
+    derivative: str | BaseDifferentiation,
+    window: int = 1,
+    xi: np.ndarray | None = None,
+) -> list[Gram]:
+    """Normal equations of each trajectory, streamed chunk by chunk (memory: one chunk)."""
+    out = [Gram.zeros(len(feature_names), len(trajs[0].state_names)) for _ in trajs]
+    for index, theta, y in iter_rows(trajs, feature_names, derivative, window, xi):
+        if not np.isfinite(theta).all():
+            raise ValueError(
+                "the library evaluates to NaN or inf on this data (e.g. sec or tan near 90 deg)"
+            )
+        part = Gram.from_rows(theta, y)
+        out[index] = part if out[index].rows == 0 else out[index] + part
+    return out
+
+
+# -- identifiability --------------------------------------------------------------------
+def check_identifiable(
+    gram: Gram,
+    feature_names: Sequence[str],
+    trajs: Sequence[Trajectory] | None = None,
+    tol: float = SINGULAR_TOL,
+) -> dict[str, float]:
+    """Refuses data on which the library cannot be identified; returns conditioning numbers.
+
+    Raises ValueError (one line, naming terms and the data that would fix it) when there are
+    fewer regression rows than terms, an input never changes, a term is zero on all data, or
+    a set of terms is exactly collinear (smallest singular value of the column-normalised
+    library below ``tol`` times the largest).
+
+    Args:
+        gram: Normal equations of the library on the data.
+        feature_names: The library.
+        trajs: The data (for the per-input excitation check).
+        tol: Collinearity tolerance on the normalised singular values.
+
+    Returns:
+        ``{"condition": ...}``: the condition number of the column-normalised library.
+    """
+    names = list(feature_names)
+    p = len(names)
+    if gram.rows < p:
+        raise ValueError(
+            f"only {gram.rows} regression rows for a library of {p} terms: record at least "
+            f"{p - gram.rows} more samples, or use a smaller library"
+        )
+    if trajs:
+        u = np.concatenate([tr.u for tr in trajs])
+        for j, name in enumerate(trajs[0].input_names):
+            span = np.ptp(u[:, j])
+            if span <= 1e-12 * max(np.abs(u[:, j]).max(), 1e-300):
+                with_input = [n for n in names if name in {f.var for f in parse_term(n)}]
+                raise ValueError(
+                    f"input {name!r} is constant ({u[0, j]:g}) over all data, so its terms "
+                    f"{with_input[:4]} cannot be told from the others: record data in which "
+                    f"{name} varies (e.g. add excitation to it)"
+                )
+    norm = gram.col_norms
+    zero = [names[j] for j in np.flatnonzero(norm <= 0)]
+    if zero:
+        raise ValueError(
+            f"term(s) {zero[:6]} are zero on all data: record data in which they vary, or "
+            "remove them from the library"
+        )
+    _, sing, vt = np.linalg.svd(gram.r / norm, full_matrices=False)
+    ratio = sing[-1] / sing[0]
+    if ratio < tol:
+        vec = vt[-1]
+        involved = [names[j] for j in np.argsort(-np.abs(vec)) if abs(vec[j]) > 0.05][:6]
+        raise ValueError(
+            f"terms {involved} are exactly collinear on this data (a combination of them is "
+            f"zero to {ratio:.0e} of the largest): record data in which they vary "
+            "independently (other inputs, larger angles), or remove all but one of them"
+        )
+    return {"condition": float(1.0 / ratio)}
+
+
+# -- sparse regression ------------------------------------------------------------------
+def _make_optimizer(config: FitConfig) -> BaseOptimizer:
+    if isinstance(config.optimizer, BaseOptimizer):
+        opt = clone(config.optimizer)
+        if config.set_lam and "threshold" in opt.get_params():
+            opt.set_params(threshold=config.lam)
+        return opt
+    if config.optimizer == "sr3":
+        nu = 1.0
+        weight = ps.SR3.calculate_l0_weight(config.lam, nu)
+        return ps.SR3(reg_weight_lam=weight, regularizer="L0", relax_coeff_nu=nu, max_iter=100)
+    stlsq = ps.STLSQ(threshold=config.lam, alpha=0.0, max_iter=50)
+    if config.optimizer == "stlsq":
+        return stlsq
+    return ps.EnsembleOptimizer(stlsq, bagging=True, n_models=config.n_models)
+
+
+@dataclass
+class WarningTally:
+    """Counts pysindy's warnings instead of printing each (summarised once by the caller)."""
+
+    counts: dict[str, int] = field(default_factory=dict)
+
+    def add(self, caught: Sequence[warnings.WarningMessage]) -> None:
+        """Adds caught warnings, keyed by their first line."""
+        for w in caught:
+            key = str(w.message).splitlines()[0][:120]
+            self.counts[key] = self.counts.get(key, 0) + 1
+
+    def summary(self) -> str:
+        """One line, or the empty string when nothing was caught."""
+        if not self.counts:
+            return ""
+        total = sum(self.counts.values())
+        top = max(self.counts, key=self.counts.get)  # type: ignore[arg-type]
+        return f"{total} optimizer warning(s) (e.g. {top!r}); results are validated regardless"
+
+
+TALLY = WarningTally()
+"""Warnings of the optimizers run since the last :meth:`WarningTally.counts` reset."""
+
+
+def _scales(gram: Gram, scale: bool) -> tuple[np.ndarray, np.ndarray]:
+    n = max(gram.rows, 1)
+    col = gram.col_norms / np.sqrt(n) if scale else np.ones(gram.p)
+    col[col == 0] = 1.0
+    row = gram.y_norms / np.sqrt(n) if scale else np.ones(gram.r_aug.shape[1] - gram.p)
+    row[row == 0] = 1.0
+    return col, row
+
+
+def solve(gram: Gram, config: FitConfig) -> np.ndarray:
+    """Scaled sparse regression on the triangular factor with a pysindy optimizer, debiased.
+
+    The optimizer sees ``A = R`` and ``B = Q^T Y`` (p rows), whose least-squares objective
+    equals that of the data rows up to a constant.
+
+    Returns:
+        Coefficients, shape (n_targets, n_features), in the units of Theta and Y.
+    """
+    col, row = _scales(gram, config.scale)
+    a = gram.r / col[None, :]
+    b = gram.z / row[None, :]
+    if config.lam == 0 and isinstance(config.optimizer, str):
+        coef_s = np.linalg.lstsq(a, b, rcond=None)[0].T
+    else:
+        opt = _make_optimizer(config)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            opt.fit(a, b)
+        TALLY.add(caught)
+        coef_s = _debias(a, b, np.atleast_2d(opt.coef_) != 0)
+    return coef_s * row[:, None] / col[None, :]
+
+
+def _debias(a: np.ndarray, b: np.ndarray, support: np.ndarray) -> np.ndarray:
+    out = np.zeros(support.shape)
+    for i in range(support.shape[0]):
+        cols = np.flatnonzero(support[i])
+        if cols.size:
+            out[i, cols] = np.linalg.lstsq(a[:, cols], b[:, i], rcond=None)[0]
+    return out
+
+
+def sparse_regression(theta: np.ndarray, y: np.ndarray, config: FitConfig) -> np.ndarray:
+    """Scaled sparse regression on explicit rows (pysindy's ensemble bags rows).
+
+    Returns:
+        Coefficients, shape (n_targets, n_features), in the units of theta and y.
+    """
+    if not np.isfinite(theta).all():
+        raise ValueError("the library evaluates to NaN or inf on this data (e.g. sec near 90 deg)")
+    is_ensemble = config.optimizer == "ensemble" or isinstance(
+        config.optimizer, ps.EnsembleOptimizer
+    )
+    if not is_ensemble or config.lam == 0:
+        return solve(Gram.from_rows(theta, y), config)
+    col = np.sqrt(np.mean(theta**2, axis=0)) if config.scale else np.ones(theta.shape[1])
+    col[col == 0] = 1.0
+    row = np.sqrt(np.mean(y**2, axis=0)) if config.scale else np.ones(y.shape[1])
+    row[row == 0] = 1.0
+    ts, ys = theta / col, y / row
+    # pysindy's bagging draws from numpy's global RNG: seed it, then restore the caller's state
+    state = np.random.get_state()  # noqa: NPY002
+    try:
+        np.random.seed(config.seed)  # noqa: NPY002
+        opt = _make_optimizer(config)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            opt.fit(ts, ys)
+        TALLY.add(caught)
+    finally:
+        np.random.set_state(state)  # noqa: NPY002
+    coef_s = _debias(ts, ys, np.atleast_2d(opt.coef_) != 0)
+    return coef_s * row[:, None] / col[None, :]
 
 
 def _check_dataset(trajs: Sequence[Trajectory]) -> None:
@@ -85,121 +494,33 @@ def _check_dataset(trajs: Sequence[Trajectory]) -> None:
             raise ValueError("all trajectories must have the same state and input names")
 
 
-def _window_mean(rows: np.ndarray, w: int) -> np.ndarray:
-    """Means of w consecutive rows (all overlapping windows)."""
-    if w == 1:
-        return rows
-    c = np.concatenate([np.zeros((1, rows.shape[1])), np.cumsum(rows, axis=0)])
-    return (c[w:] - c[:-w]) / w
-
-
-def _targets(tr: Trajectory, w: int) -> np.ndarray:
-    return (tr.x[w:] - tr.x[:-w]) / (w * tr.dt)
-
-
-def _rk4_stage_theta(
-    theta: Callable, rhs: Callable, x: np.ndarray, u: np.ndarray, dt: float
+def fit_coefficients(
+    trajs: Sequence[Trajectory], feature_names: Sequence[str], config: FitConfig
 ) -> np.ndarray:
-    """RK4 average of Theta over the stages of each step (input held)."""
-    h = dt
-    k1 = rhs(x, u)
-    s2 = x + 0.5 * h * k1
-    k2 = rhs(s2, u)
-    s3 = x + 0.5 * h * k2
-    k3 = rhs(s3, u)
-    s4 = x + h * k3
-    return (theta(x, u) + 2 * theta(s2, u) + 2 * theta(s3, u) + theta(s4, u)) / 6.0
+    """Xi for one configuration: the formulation's fixed point (no identifiability check)."""
+    names = list(feature_names)
+    is_ensemble = config.optimizer == "ensemble" or isinstance(
+        config.optimizer, ps.EnsembleOptimizer
+    )
 
-
-def regression_rows(
-    trajs: Sequence[Trajectory],
-    feature_names: Sequence[str],
-    derivative: str,
-    window: int = 1,
-    xi: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Stacks (Theta, Y) over trajectories for one formulation.
-
-    Args:
-        trajs: Data.
-        feature_names: Library.
-        derivative: One of :data:`DERIVATIVES`.
-        window: Integral window (``rk4``/``forward``).
-        xi: Current coefficients for the ``rk4`` stage points (required for ``rk4``).
-
-    Returns:
-        Theta (rows, p) and Y (rows, n).
-    """
-    names = (trajs[0].state_names, trajs[0].input_names)
-    theta = compile_features(feature_names, *names)
-    rhs = compile_rhs(feature_names, xi, *names) if xi is not None else None
-    thetas, targets = [], []
-    for tr in trajs:
-        if len(tr) <= window:
-            raise ValueError(f"a trajectory of {len(tr)} samples is too short for window {window}")
-        x, u = tr.x[:-1], tr.u[:-1]
-        if derivative == "forward":
-            thetas.append(_window_mean(theta(x, u), window))
-            targets.append(_targets(tr, window))
-        elif derivative == "rk4":
-            if rhs is None:
-                raise ValueError("the rk4 formulation needs current coefficients (xi)")
-            thetas.append(_window_mean(_rk4_stage_theta(theta, rhs, x, u, tr.dt), window))
-            targets.append(_targets(tr, window))
-        else:
-            method = (
-                ps.FiniteDifference(order=2)
-                if derivative == "central"
-                else ps.SmoothedFiniteDifference()
+    def one(derivative: str | BaseDifferentiation, xi: np.ndarray | None) -> np.ndarray:
+        if is_ensemble:
+            return sparse_regression(
+                *regression_rows(trajs, names, derivative, config.window, xi), config
             )
-            thetas.append(theta(tr.x, tr.u))
-            targets.append(method._differentiate(tr.x, tr.t))
-    return np.concatenate(thetas), np.concatenate(targets)
+        return solve(Gram.stack(grams(trajs, names, derivative, config.window, xi)), config)
 
-
-def _make_optimizer(config: FitConfig) -> ps.optimizers.BaseOptimizer:
-    if config.optimizer == "sr3":
-        nu = 1.0
-        weight = ps.SR3.calculate_l0_weight(config.lam, nu)
-        return ps.SR3(reg_weight_lam=weight, regularizer="L0", relax_coeff_nu=nu, max_iter=100)
-    stlsq = ps.STLSQ(threshold=config.lam, alpha=0.0, max_iter=50)
-    if config.optimizer == "stlsq":
-        return stlsq
-    return ps.EnsembleOptimizer(stlsq, bagging=True, n_models=config.n_models)
-
-
-def sparse_regression(theta: np.ndarray, y: np.ndarray, config: FitConfig) -> np.ndarray:
-    """Scaled sparse regression with a pysindy optimizer and a least-squares refit.
-
-    Returns:
-        Coefficients, shape (n_targets, n_features), in the units of theta and y.
-    """
-    if not np.isfinite(theta).all():
-        raise ValueError("the library evaluates to NaN or inf on this data (e.g. sec near 90 deg)")
-    col = np.sqrt(np.mean(theta**2, axis=0)) if config.scale else np.ones(theta.shape[1])
-    col[col == 0] = 1.0
-    row = np.sqrt(np.mean(y**2, axis=0)) if config.scale else np.ones(y.shape[1])
-    row[row == 0] = 1.0
-    ts, ys = theta / col, y / row
-    if config.lam == 0:
-        coef_s = np.linalg.lstsq(ts, ys, rcond=None)[0].T
-    else:
-        if config.optimizer == "ensemble":
-            np.random.seed(config.seed)  # noqa: NPY002 (pysindy's bagging uses the global RNG)
-        opt = _make_optimizer(config)
-        opt.fit(ts, ys)
-        coef_s = np.atleast_2d(opt.coef_)
-        coef_s = _debias(ts, ys, coef_s != 0)
-    return coef_s * row[:, None] / col[None, :]
-
-
-def _debias(ts: np.ndarray, ys: np.ndarray, support: np.ndarray) -> np.ndarray:
-    out = np.zeros(support.shape)
-    for i in range(support.shape[0]):
-        cols = np.flatnonzero(support[i])
-        if cols.size:
-            out[i, cols] = np.linalg.lstsq(ts[:, cols], ys[:, i], rcond=None)[0]
-    return out
+    if config.derivative != "rk4":
+        return one(config.derivative, None)
+    # Start from the forward-difference fit, then iterate the stage points to a fixed point.
+    xi = one("forward", None)
+    for _ in range(config.iterations):
+        new = one("rk4", xi)
+        change = np.abs(new - xi).max() / max(np.abs(new).max(), 1e-300)
+        xi = new
+        if change < 1e-13:
+            break
+    return xi
 
 
 def fit(
@@ -208,124 +529,43 @@ def fit(
     config: FitConfig | None = None,
     system: str | None = None,
 ) -> IdentifiedModel:
-    """Identifies dx/dt = Xi Theta(x, u) from trajectories.
+    """Identifies dx/dt = Xi Theta(x, u) from trajectories with one fixed configuration.
+
+    For automatic choice of lambda and window use :func:`identification.selection.select_model`.
 
     Args:
-        trajs: Training trajectories (same variables; dt may differ between them).
+        trajs: Training trajectories (same variables; steps may differ, row by row).
         feature_names: The candidate library.
         config: Formulation, optimizer and threshold.
-        system: Vehicle the data come from (``planar``/``quad6dof``), if any.
+        system: Optional label of the vehicle (``planar``/``quad6dof`` are checked).
 
     Returns:
         The identified model, with the fit settings in ``meta``.
+
+    Raises:
+        ValueError: The data cannot identify the library (see :func:`check_identifiable`).
     """
     config = config or FitConfig()
     _check_dataset(trajs)
-    feature_names = list(feature_names)
-    if config.derivative == "rk4":
-        # Start from the forward-difference fit, then iterate the stage points to a fixed point.
-        xi = sparse_regression(
-            *regression_rows(trajs, feature_names, "forward", config.window), config
-        )
-        for _ in range(config.iterations):
-            theta, y = regression_rows(trajs, feature_names, "rk4", config.window, xi)
-            new = sparse_regression(theta, y, config)
-            change = np.abs(new - xi).max() / max(np.abs(new).max(), 1e-300)
-            xi = new
-            if change < 1e-13:
-                break
-    else:
-        xi = sparse_regression(
-            *regression_rows(trajs, feature_names, config.derivative, config.window), config
-        )
+    names = [term_name(parse_term(n)) for n in feature_names]
+    first = trajs[0]
+    for n in feature_names:
+        parse_term(n, [*first.state_names, *first.input_names])
+    base = Gram.stack(grams(trajs, names, "forward", 1))
+    conditioning = check_identifiable(base, names, trajs)
+    xi = fit_coefficients(trajs, list(feature_names), config)
     meta = {
-        "method": config.derivative,
-        "optimizer": config.optimizer,
-        "lambda": config.lam,
-        "window": config.window,
+        **config.label,
         "n_trajectories": len(trajs),
         "n_samples": int(sum(len(t) for t in trajs)),
-        "dt": trajs[0].dt,
+        "dt": first.dt,
+        "conditioning": conditioning,
     }
-    first = trajs[0]
-    return IdentifiedModel(feature_names, xi, first.state_names, first.input_names, system, meta)
+    return IdentifiedModel(
+        list(feature_names), xi, first.state_names, first.input_names, system, meta
+    )
 
 
-@dataclass
-class ScanResult:
-    """Outcome of a lambda scan.
-
-    Attributes:
-        lambdas: The grid.
-        n_terms: Non-zero terms of each fit.
-        scores: Validation score of each fit (lower is better; inf if it diverged).
-        models: The fitted models.
-        best: Index of the chosen fit.
-    """
-
-    lambdas: list[float]
-    n_terms: list[int]
-    scores: list[float]
-    models: list[IdentifiedModel] = field(repr=False)
-    best: int
-
-    @property
-    def model(self) -> IdentifiedModel:
-        """The chosen model."""
-        return self.models[self.best]
-
-    @property
-    def lam(self) -> float:
-        """The chosen lambda."""
-        return self.lambdas[self.best]
-
-
-def choose_best(scores: Sequence[float], n_terms: Sequence[int], rel_tol: float = 0.1) -> int:
-    """Sparsest fit whose score is within ``rel_tol`` of the best (ties: lower score)."""
-    scores_a = np.asarray(scores, dtype=float)
-    if not np.isfinite(scores_a).any():
-        raise ValueError("every fit of the scan diverged on the validation data")
-    best = np.nanmin(scores_a[np.isfinite(scores_a)])
-    ok = np.flatnonzero(scores_a <= best * (1 + rel_tol) + 1e-12)
-    return int(min(ok, key=lambda i: (n_terms[i], scores_a[i])))
-
-
-def scan_lambda(
-    trajs: Sequence[Trajectory],
-    feature_names: Sequence[str],
-    score: Callable[[IdentifiedModel], float],
-    lambdas: Sequence[float] = DEFAULT_LAMBDAS,
-    config: FitConfig | None = None,
-    system: str | None = None,
-    progress: Callable[[int, int], None] | None = None,
-) -> ScanResult:
-    """Fits over a lambda grid and picks the sparsest model that validates best.
-
-    Args:
-        trajs: Training data.
-        feature_names: Library.
-        score: Validation error of a model (e.g. closed-loop RMSE on held-out runs).
-        lambdas: The grid.
-        config: Fit settings (its lam is replaced by each grid value).
-        system: Vehicle name for the models.
-        progress: Called with (done, total) after each fit.
-
-    Returns:
-        The scan with the chosen model.
-    """
-    config = config or FitConfig()
-    models, scores = [], []
-    for i, lam in enumerate(lambdas):
-        cfg = FitConfig(**{**config.__dict__, "lam": float(lam)})
-        try:
-            model = fit(trajs, feature_names, cfg, system)
-            value = float(score(model))
-        except (np.linalg.LinAlgError, FloatingPointError, ValueError):
-            model, value = None, float("inf")
-        models.append(model)
-        scores.append(value if np.isfinite(value) else float("inf"))
-        if progress:
-            progress(i + 1, len(lambdas))
-    n_terms = [m.n_terms if m is not None else 10**9 for m in models]
-    best = choose_best(scores, n_terms)
-    return ScanResult([float(v) for v in lambdas], n_terms, scores, models, best)  # type: ignore[arg-type]
+def replace_config(config: FitConfig, **changes: object) -> FitConfig:
+    """``dataclasses.replace`` for :class:`FitConfig` (validated again)."""
+    return dataclasses.replace(config, **changes)

@@ -8,7 +8,10 @@ so the paper's exact pysindy library and our physics-informed ones are interchan
 from __future__ import annotations
 
 import itertools
+import sys
 from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pysindy as ps
@@ -109,6 +112,10 @@ def generic_library(
     return list(dict.fromkeys(canonical))  # drop duplicates, keep order
 
 
+PRESETS = ("planar", "quad6dof")
+"""Names of the preset libraries."""
+
+
 def default_library(system: str) -> list[str]:
     """The physics-informed default library of ``planar`` or ``quad6dof``."""
     if system == "planar":
@@ -116,3 +123,133 @@ def default_library(system: str) -> list[str]:
     if system == "quad6dof":
         return quad6dof_library()
     raise ValueError(f"unknown system {system!r}; valid choices: planar, quad6dof")
+
+
+@dataclass(frozen=True)
+class LibrarySpec:
+    """A library described by a few choices instead of a list of terms.
+
+    Attributes:
+        degree: Largest total degree of the polynomials in the non-angle variables.
+        angles: Angle variables: they enter through sin(k a), cos(k a) only.
+        frequencies: Largest k of the Fourier terms.
+        trig_products: Multiply each Fourier term by every degree-1 monomial (states and inputs).
+        input_products: Multiply each Fourier term by each input only (when not trig_products).
+        extra: Further named features in the grammar of :mod:`identification.features`.
+    """
+
+    degree: int = 2
+    angles: tuple[str, ...] = ()
+    frequencies: int = 1
+    trig_products: bool = True
+    input_products: bool = True
+    extra: tuple[str, ...] = field(default_factory=tuple)
+
+    def build(self, state_names: Sequence[str], input_names: Sequence[str]) -> list[str]:
+        """The feature names for these variables (duplicates removed, order kept)."""
+        variables = [*state_names, *input_names]
+        unknown = [a for a in self.angles if a not in variables]
+        if unknown:
+            raise ValueError(f"angle(s) {unknown} are not variables of the data {variables}")
+        if self.degree < 0 or self.frequencies < 0:
+            raise ValueError("degree and frequencies must be >= 0")
+        plain = [v for v in variables if v not in self.angles]
+        names = ["1"]
+        for d in range(1, self.degree + 1):
+            names += [" ".join(c) for c in itertools.combinations_with_replacement(plain, d)]
+        fourier = [
+            f"{fn}({k} {a})" if k > 1 else f"{fn}({a})"
+            for a in self.angles
+            for k in range(1, self.frequencies + 1)
+            for fn in ("sin", "cos")
+        ]
+        mult = plain if self.trig_products else (input_names if self.input_products else [])
+        mult = [m for m in mult if m not in self.angles]
+        names += [f"{m} {f}" if m else f for f in fourier for m in ["", *mult]]
+        names += list(self.extra)
+        canonical = [term_name(parse_term(n, variables)) for n in names]
+        return list(dict.fromkeys(canonical))
+
+
+def _parse_spec_text(text: str) -> dict[str, object]:
+    """``degree=2;angles=phi,theta;extra=u1 sin(phi),y_dot^3`` -> a dict for LibrarySpec."""
+    out: dict[str, object] = {}
+    for item in filter(None, (p.strip() for p in text.split(";"))):
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"library spec item {item!r} is not key=value")
+        key = key.strip()
+        if key in ("degree", "frequencies"):
+            out[key] = int(value)
+        elif key in ("trig_products", "input_products"):
+            out[key] = value.strip().lower() in ("1", "true", "yes")
+        elif key in ("angles", "extra"):
+            out[key] = tuple(v.strip() for v in value.split(",") if v.strip())
+        else:
+            raise ValueError(f"unknown library spec key {key!r}")
+    return out
+
+
+def library_from_spec(
+    spec: str | LibrarySpec | Sequence[str] | None,
+    state_names: Sequence[str],
+    input_names: Sequence[str],
+    angles: Sequence[str] = (),
+) -> list[str]:
+    """A library from a preset name, a spec string, a TOML file, a spec or a list of terms.
+
+    Args:
+        spec: ``planar`` / ``quad6dof`` (presets); a path to a TOML file with a ``[library]``
+            table (keys of :class:`LibrarySpec`); a string such as
+            ``degree=2;angles=phi;extra=u1 sin(phi)``; a :class:`LibrarySpec`; a list of
+            feature names; or None (``degree=2`` with the declared ``angles``).
+        state_names: The data's states.
+        input_names: The data's inputs.
+        angles: Declared angle variables (used when the spec names none).
+
+    Returns:
+        Feature names.
+    """
+    variables = [*state_names, *input_names]
+    if isinstance(spec, LibrarySpec):
+        return spec.build(state_names, input_names)
+    if spec is None:
+        return LibrarySpec(angles=tuple(angles)).build(state_names, input_names)
+    if isinstance(spec, str):
+        if spec in PRESETS:
+            names = default_library(spec)
+            for name in names:
+                parse_term(name, variables)  # raises naming a variable the data lack
+            return names
+        if spec.endswith(".toml"):
+            return LibrarySpec(**_read_toml(Path(spec), angles)).build(state_names, input_names)
+        fields = _parse_spec_text(spec)
+        fields.setdefault("angles", tuple(angles))
+        return LibrarySpec(**fields).build(state_names, input_names)  # type: ignore[arg-type]
+    names = [term_name(parse_term(n, variables)) for n in spec]
+    return list(dict.fromkeys(names))
+
+
+def _read_toml(path: Path, angles: Sequence[str]) -> dict[str, object]:
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    if not path.exists():
+        raise FileNotFoundError(f"no such library file: {path}")
+    try:
+        table = tomllib.loads(path.read_text()).get("library")
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: malformed TOML ({exc})") from None
+    if not isinstance(table, dict):
+        raise ValueError(f"{path}: needs a [library] table")
+    allowed = set(LibrarySpec.__dataclass_fields__)
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise ValueError(f"{path}: unknown key(s) {unknown}; valid: {sorted(allowed)}")
+    out = dict(table)
+    for key in ("angles", "extra"):
+        if key in out:
+            out[key] = tuple(out[key])
+    out.setdefault("angles", tuple(angles))
+    return out

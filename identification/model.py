@@ -28,9 +28,11 @@ class IdentifiedModel:
         coefficients: Xi, shape (n_states, n_features).
         state_names: Names of the states (rows of Xi).
         input_names: Names of the inputs.
-        system: ``planar``/``quad6dof`` when the model stands for a known vehicle (enables
-            closed-loop simulation with its saturation and controller), else None.
-        meta: Provenance: method, lambda, optimizer, dt, data size, ...
+        system: An optional label of the vehicle (``planar``/``quad6dof`` are checked against
+            the presets' variable names; any other label is kept as given), or None.
+        meta: Provenance: method, lambda, optimizer, dt, data size, selection scores, ...
+        coefficient_std: Ensemble (bootstrap) spread of each coefficient, shape of Xi, or None.
+        inclusion_probability: Fraction of ensemble fits that kept each term, or None.
     """
 
     feature_names: list[str]
@@ -39,6 +41,8 @@ class IdentifiedModel:
     input_names: tuple[str, ...]
     system: str | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    coefficient_std: np.ndarray | None = None
+    inclusion_probability: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.feature_names = list(self.feature_names)
@@ -106,8 +110,21 @@ class IdentifiedModel:
         return int(np.count_nonzero(self.coefficients))
 
     # -- text -------------------------------------------------------------------------
-    def equations(self, precision: int = 4, latex: bool = False) -> list[str]:
-        """One equation per state, in plain text or LaTeX."""
+    def equations(
+        self, precision: int = 4, latex: bool = False, uncertainty: bool = True
+    ) -> list[str]:
+        """One equation per state, in plain text or LaTeX.
+
+        Args:
+            precision: Significant digits of the coefficients.
+            latex: LaTeX instead of plain text.
+            uncertainty: Where the model carries ensemble statistics, show each coefficient's
+                spread and inclusion probability: ``-2 (+-1e-05, P=1.00) sin(phi) u1``.
+
+        Returns:
+            The equations, one string per state.
+        """
+        stats = uncertainty and self.coefficient_std is not None
         lines = []
         for i, state in enumerate(self.state_names):
             parts = []
@@ -118,6 +135,17 @@ class IdentifiedModel:
                 term = parse_term(name)
                 text = term_latex(term) if latex else term_name(term)
                 coef = f"{c:.{precision}g}"
+                if stats:
+                    std = self.coefficient_std[i, j]  # type: ignore[index]
+                    prob = (
+                        self.inclusion_probability[i, j]
+                        if self.inclusion_probability is not None
+                        else float("nan")
+                    )
+                    if latex:
+                        coef = f"({coef} \\pm {std:.2g})_{{P={prob:.2f}}}"
+                    else:
+                        coef = f"{coef} (+-{std:.2g}, P={prob:.2f})"
                 parts.append(coef if text == "1" else f"{coef} {text}")
             rhs = " + ".join(parts).replace("+ -", "- ") if parts else "0"
             if latex:
@@ -158,8 +186,14 @@ class IdentifiedModel:
             "input_names": list(self.input_names),
             "feature_names": self.feature_names,
             "coefficients": self.coefficients.tolist(),
-            "equations": self.equations(precision=8),
-            "meta": self.meta,
+            "coefficient_std": None
+            if self.coefficient_std is None
+            else self.coefficient_std.tolist(),
+            "inclusion_probability": None
+            if self.inclusion_probability is None
+            else self.inclusion_probability.tolist(),
+            "equations": self.equations(precision=8, uncertainty=False),
+            "meta": json_safe(self.meta),
         }
 
     @classmethod
@@ -191,8 +225,10 @@ class IdentifiedModel:
             return cls(
                 data["feature_names"], coefficients, tuple(data["state_names"]),
                 tuple(data["input_names"]), data.get("system"), dict(data.get("meta") or {}),
+                _optional_array(data.get("coefficient_std")),
+                _optional_array(data.get("inclusion_probability")),
             )  # fmt: skip
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             raise ValueError(f"{source}: {exc}") from None
 
     def save(self, path: str | Path) -> Path:
@@ -210,8 +246,32 @@ def load_model(path: str | Path) -> IdentifiedModel:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such model file: {path}")
+    if not path.is_file():
+        raise ValueError(f"{path} is not a file (a model is a JSON file)")
     try:
         data = json.loads(path.read_text())
+    except UnicodeDecodeError:
+        raise ValueError(f"{path} is not a model file: not text (binary?)") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: malformed JSON ({exc})") from None
     return IdentifiedModel.from_dict(data, source=str(path))
+
+
+def _optional_array(value: Any) -> np.ndarray | None:
+    return None if value is None else np.array(value, dtype=np.float64)
+
+
+def json_safe(obj: Any) -> Any:
+    """A copy of ``obj`` that strict JSON accepts: non-finite floats become None (null)."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist())
+    if isinstance(obj, float | np.floating):
+        value = float(obj)
+        return value if np.isfinite(value) else None
+    if isinstance(obj, np.integer | np.bool_):
+        return obj.item()
+    return obj

@@ -130,52 +130,113 @@ def identify(
     data: Annotated[list[Path], typer.Argument(help="CSV or NPZ trajectory files")],
     out: Annotated[Path, typer.Option(help="model JSON to write")],
     system: Annotated[
-        SystemName, typer.Option(help="vehicle the data come from")
-    ] = SystemName.planar,
+        SystemName | None, typer.Option(help="preset vehicle: its variable names and library")
+    ] = None,
     columns: Annotated[str | None, typer.Option(help="names of a headerless CSV's columns")] = None,
-    lam: Annotated[str, typer.Option("--lambda", help="'auto' (scan) or a threshold")] = "auto",
+    states: Annotated[str | None, typer.Option(help="state columns, comma-separated")] = None,
+    inputs: Annotated[str | None, typer.Option(help="input columns, comma-separated")] = None,
+    angles: Annotated[str | None, typer.Option(help="angle states (Fourier terms)")] = None,
+    library: Annotated[
+        str | None,
+        typer.Option(help="planar | quad6dof | FILE.toml | 'degree=2;angles=phi;extra=...'"),
+    ] = None,
+    lam: Annotated[
+        str, typer.Option("--lambda", help="'auto' (validated) or a threshold")
+    ] = "auto",
     method: Annotated[str, typer.Option(help="rk4 | forward | central | smoothed | paper")] = "rk4",
-    optimizer: Annotated[str, typer.Option(help="sr3 | stlsq | ensemble")] = "sr3",
-    window: Annotated[int, typer.Option(help="integral window (noisy data: 10-20)")] = 1,
+    optimizer: Annotated[str, typer.Option(help="stlsq | sr3 | ensemble")] = "stlsq",
+    window: Annotated[str, typer.Option(help="integral window: 'auto' or steps")] = "auto",
+    plot: Annotated[Path | None, typer.Option(help="selection plot (default: OUT.png)")] = None,
 ) -> None:
-    """Identifies a SINDy-with-control model from data and prints its equations."""
-    from identification.data import load_data
-    from identification.experiments.evaluate import (
-        compare_closed_loop,
-        normalized_score,
-        validation_references,
-    )
-    from identification.experiments.paper import PAPER_LAMBDA, fit_paper
-    from identification.fit import FitConfig, fit, scan_lambda
-    from identification.libraries import default_library
+    """Identifies a SINDy-with-control model from data alone and prints its equations.
+
+    With ``--lambda auto`` the threshold and the integral window are chosen by
+    cross-validated multi-step prediction on held-out parts of the data (no simulator).
+    """
+    import dataclasses
+
+    from identification.data import PRESET_ANGLES, load_data
+    from identification.fit import FitConfig, fit
+    from identification.libraries import library_from_spec
+    from identification.selection import WINDOWS, select_model
+
+    def split(text: str | None) -> list[str] | None:
+        return [c.strip() for c in text.split(",") if c.strip()] if text else None
 
     try:
-        cols = [c.strip() for c in columns.split(",")] if columns else None
-        trajs = load_data(data, cols, system.value)
+        preset = system.value if system else None
+        if (
+            preset is None
+            and states is None
+            and inputs is None
+            and library in ("planar", "quad6dof")
+        ):
+            preset = library
+        trajs, cleaning = load_data(data, split(columns), preset, split(states), split(inputs))
+        if cleaning.rows_out != cleaning.rows_in or cleaning.jitter > 1e-6:
+            typer.echo(f"data: {cleaning.summary()}")
+        first = trajs[0]
         if method == "paper":
-            if system is not SystemName.planar:
+            from identification.experiments.paper import PAPER_LAMBDA, fit_paper
+
+            if preset != "planar":
                 _fail("the paper's method is defined for the planar system only")
             model = fit_paper(trajs, PAPER_LAMBDA if lam == "auto" else float(lam))
         else:
-            config = FitConfig(derivative=method, optimizer=optimizer, window=window)
-            lib = default_library(system.value)
+            declared = split(angles) or list(PRESET_ANGLES.get(preset or "", ()))
+            lib = library_from_spec(
+                library or preset, first.state_names, first.input_names, declared
+            )
+            config = FitConfig(derivative=method, optimizer=optimizer)
+            label = preset or (library if library in ("planar", "quad6dof") else None)
             if lam == "auto":
-                refs = validation_references(system.value)
-
-                def score(m: object) -> float:
-                    return normalized_score([compare_closed_loop(m, r) for r in refs])
-
-                scan = scan_lambda(trajs, lib, score, config=config, system=system.value)
-                model = scan.model
-                typer.echo(f"lambda scan: chose {scan.lam:g} ({model.n_terms} terms)")
+                windows = WINDOWS if window == "auto" else (int(window),)
+                model, report = select_model(
+                    trajs, lib, config=config, windows=windows, system=label, progress=True
+                )
+                best = report.best
+                typer.echo(
+                    f"selection: window {best.window}, lambda {best.lam:g}, {model.n_terms} "
+                    f"terms (score {best.mean:.3g} +- {best.se:.2g}; {report.folds} folds)"
+                )
+                for note in report.warnings:
+                    typer.echo(f"warning: {note}")
+                report.plot(plot or out.with_suffix(".png"))
             else:
-                config.lam = float(lam)
-                model = fit(trajs, lib, FitConfig(**config.__dict__), system.value)
+                config = dataclasses.replace(
+                    config, lam=float(lam), window=1 if window == "auto" else int(window)
+                )
+                model = fit(trajs, lib, config, label)
     except (ValueError, FileNotFoundError) as exc:
-        _fail(str(exc))
+        _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
     model.save(out)
     typer.echo("\n".join(model.equations()))
     typer.echo(f"wrote {out}")
+
+
+@app.command()
+def show(
+    model: Annotated[Path, typer.Argument(help="identified model JSON")],
+    latex: Annotated[bool, typer.Option(help="LaTeX instead of plain text")] = False,
+    precision: Annotated[int, typer.Option(help="significant digits")] = 6,
+) -> None:
+    """Prints a model's equations with each coefficient's spread and inclusion probability."""
+    from identification.model import load_model
+
+    try:
+        loaded = load_model(model)
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(str(exc))
+    typer.echo("\n".join(loaded.equations(precision=precision, latex=latex)))
+    sel = loaded.meta.get("selection")
+    if sel:
+        chosen = sel["chosen"]
+        typer.echo(
+            f"selected: window {chosen['window']}, lambda {chosen['lambda']:g}, "
+            f"{chosen['n_terms']} terms; rule: {sel['rule']}"
+        )
+        for note in sel.get("warnings", []):
+            typer.echo(f"warning: {note}")
 
 
 @app.command()

@@ -1,8 +1,10 @@
 """``quad-sindy reproduce``: the paper end to end, with our method beside the paper's.
 
-Simulate cases A, B, C; train on C; scan lambda (validated on held-out random-waypoint
-flights, not on the test cases); compare the discovered coefficients with the truth (the
-paper's Table 2); fly the PD controller on the identified model along A and B and compare
+Simulate cases A, B, C; train on C; choose our lambda and window from case C alone
+(:func:`identification.selection.select_model`, no simulator); scan the paper method's
+lambda (validated on held-out random-waypoint flights, not on the test cases); compare the
+discovered coefficients with the truth (the paper's Table 2); fly the PD controller on the
+identified model along A and B and compare
 with the ground truth (the paper's closed-loop test); write figures, ``report.md``,
 ``model.json`` and ``metrics.json``.
 """
@@ -24,9 +26,10 @@ from identification.experiments.evaluate import (
 from identification.experiments.paper import PAPER_LAMBDA, fit_paper
 from identification.experiments.plots import plot_abs_error, plot_comparison, plot_curves
 from identification.experiments.truth import Comparison, compare_coefficients, planar_truth
-from identification.fit import DEFAULT_LAMBDAS, FitConfig, ScanResult, choose_best, fit, scan_lambda
+from identification.fit import FitConfig, fit
 from identification.libraries import planar_library
 from identification.model import IdentifiedModel
+from identification.selection import SELECT_LAMBDAS, SelectionReport, select_model
 from quad_envs.dynamics import PLANAR_STATE_NAMES
 from quad_envs.fileio import atomic_write_text, write_json
 from quad_envs.simulate import simulate_case
@@ -78,7 +81,7 @@ def _coef_table(ours: Comparison, paper: Comparison, names: list[str]) -> list[s
 
 def run(
     out: str | Path,
-    lambdas: tuple[float, ...] = DEFAULT_LAMBDAS,
+    lambdas: tuple[float, ...] = SELECT_LAMBDAS,
     authors_csv: str | Path | None = None,
     echo: Callable[[str], Any] = print,
 ) -> dict[str, Any]:
@@ -99,9 +102,11 @@ def run(
     def score(model: IdentifiedModel) -> float:
         return normalized_score([compare_closed_loop(model, ref) for ref in val_refs])
 
-    echo(f"ours: lambda scan over {len(lambdas)} values (RK4-consistent regression, SR3-L0)")
-    scan = scan_lambda(train, lib, score, lambdas, FitConfig(), "planar")
-    ours = scan.model
+    echo(
+        f"ours: {len(lambdas)} thresholds x windows, chosen by cross-validated prediction on "
+        "the training data alone (RK4-consistent regression, STLSQ)"
+    )
+    ours, selection = select_model(train, lib, lambdas=lambdas, system="planar")
     ours.save(out / "model.json")
 
     echo(f"paper's method: lambda scan over {len(PAPER_GRID)} values (forward difference, SR3-L1)")
@@ -115,7 +120,10 @@ def run(
         paper_models.append(m)
         paper_scores.append(s if np.isfinite(s) else float("inf"))
     paper_terms = [m.n_terms if m is not None else 10**9 for m in paper_models]
-    paper_best = choose_best(paper_scores, paper_terms)
+    finite = [v for v in paper_scores if np.isfinite(v)]
+    paper_best = int(np.argmin(paper_scores)) if finite else 0
+    within = [i for i, v in enumerate(paper_scores) if finite and v <= 1.1 * min(finite)]
+    paper_best = min(within, key=lambda i: (paper_terms[i], paper_scores[i])) if within else 0
     paper = fit_paper(train, PAPER_LAMBDA)
     paper.save(out / "model_paper_method.json")
 
@@ -139,7 +147,9 @@ def run(
     if authors_csv is not None and Path(authors_csv).exists():
         echo(f"fitting the authors' own case C file {authors_csv}")
         data = [read_csv(authors_csv, AUTHORS_COLUMNS)]
-        ours_a = fit(data, lib, FitConfig(lam=scan.lam), "planar")
+        best = selection.best
+        ours_a = fit(data, lib, FitConfig(optimizer="stlsq", lam=best.lam, window=best.window),
+                     "planar")  # fmt: skip
         paper_a = fit_paper(data, PAPER_LAMBDA)
         authors = {}
         for label, model in (("ours", ours_a), ("paper_method", paper_a)):
@@ -149,17 +159,17 @@ def run(
             rmse = {c: compare_closed_loop(model, c).rmse for c in "AB"}
             authors[label] = _summary(model, coef, rmse)
 
-    _plot_scans(out, scan, paper_scores, paper_terms)
+    _plot_scans(out, selection, paper_scores, paper_terms)
     metrics = {
         "rmse": results["ours"]["rmse"],
         "max_rel_coef_error": results["ours"]["max_rel_coef_error"],
         "support": results["ours"]["support"],
-        "lambda": scan.lam,
+        "lambda": selection.best.lam,
         "ours": results["ours"],
         "paper_method": results["paper_method"],
         "paper_method_scan_best_lambda": float(PAPER_GRID[paper_best]),
         "paper_published_rmse": PAPER_PUBLISHED_RMSE,
-        "scan": {"lambdas": scan.lambdas, "n_terms": scan.n_terms, "scores": scan.scores},
+        "scan": selection.to_meta(),
         "paper_scan": {
             "lambdas": [float(v) for v in PAPER_GRID],
             "n_terms": paper_terms,
@@ -174,18 +184,9 @@ def run(
 
 
 def _plot_scans(
-    out: Path, scan: ScanResult, paper_scores: list[float], paper_terms: list[int]
+    out: Path, selection: SelectionReport, paper_scores: list[float], paper_terms: list[int]
 ) -> None:
-    plot_curves(
-        scan.lambdas,
-        {"validation error (ours)": scan.scores},
-        out / "lambda_scan_ours.png",
-        "lambda (scaled threshold)",
-        "normalised closed-loop RMSE",
-        "Lambda scan, RK4-consistent SINDy",
-        secondary={"terms": scan.n_terms},
-        secondary_label="non-zero terms",
-    )
+    selection.plot(out / "lambda_scan_ours.png")
     terms = [t if t < 10**9 else np.nan for t in paper_terms]
     plot_curves(
         list(PAPER_GRID),
@@ -219,12 +220,15 @@ def _report(metrics: dict, comps: dict, lib: list[str]) -> str:
         "# Reproduction of Manaa et al. (planar quadrotor, SINDy with control)",
         "",
         "Training data: case C (diamond), RK4 at dt = 0.01 s, 1001 samples, paper PD controller.",
-        "Lambda chosen on two held-out random-waypoint flights (not on the test cases).",
+        "Our lambda and window: chosen from the training data alone (k-fold over blocks of",
+        "case C, multi-step prediction, one-standard-error rule); the paper's method's",
+        "lambda scan is flown on two held-out random-waypoint flights (a truth-based report).",
         "Test: the PD controller flies cases A and B on the identified model and on the truth.",
         "",
         "## Discovered equations",
         "",
-        f"Ours (RK4-consistent regression, SR3-L0, lambda = {metrics['lambda']:g}):",
+        f"Ours (RK4-consistent regression, STLSQ, lambda = {metrics['lambda']:g}, chosen by "
+        "cross-validated prediction on the training data):",
         "",
         "```",
         *ours["equations"],

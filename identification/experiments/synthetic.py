@@ -1,0 +1,353 @@
+"""Synthetic data for vehicles other than the paper's: the test bench of truth-free identification.
+
+Everything here knows the truth (it integrates :func:`quad_envs.dynamics.planar_rhs` /
+:func:`quad_envs.dynamics.quad6dof_rhs` with chosen parameters), so it lives in
+``experiments`` and is used by tests, studies and the figures script, never by ``identify``.
+
+Flights are either closed loop (the vehicle's PD on random waypoints plus random input
+excitation, tilts of about 0.2 rad) or open loop (hover thrust plus smooth random sines on
+every input). The inputs recorded are the *applied* (saturated) ones, held over each step.
+Three integrators make data that no method can mistake for its own:
+
+``rk4``       one RK4 step per sample (our formulation's own integrator: exact for ``rk4``);
+``rk4x10``    ten RK4 substeps per sample;
+``solve_ivp`` scipy's DOP853 at rtol 1e-11 over each sample step, the input held (ZOH).
+
+Optional linear drag (force ``-c v`` on the translational velocities) changes the vehicle,
+and :func:`truth_planar` / :func:`truth_quad6dof` give the true coefficients of what was flown.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from identification.data import Trajectory
+from quad_envs.controllers import PlanarPD, Quad6DOFPD
+from quad_envs.dynamics import (
+    PLANAR_INPUT_NAMES,
+    PLANAR_STATE_NAMES,
+    QUAD6DOF_INPUT_NAMES,
+    QUAD6DOF_STATE_NAMES,
+    planar_rhs,
+    quad6dof_rhs,
+    saturate_planar,
+    saturate_quad6dof,
+)
+from quad_envs.integrators import rk4_step
+from quad_envs.params import PlanarQuadParams, Quad6DOFParams
+from quad_envs.trajectories import RandomWaypoints
+
+INTEGRATORS = ("rk4", "rk4x10", "solve_ivp")
+
+OTHER_PLANAR = PlanarQuadParams(mass=0.5, Ixx=3e-3, arm_length=0.15, rotor_force_max=0.5 * 9.81)
+"""A planar vehicle unlike the paper's: 2.8x the mass, 12x the inertia."""
+
+OTHER_6DOF = Quad6DOFParams(
+    mass=0.8, Jxx=6e-3, Jyy=7e-3, Jzz=1.2e-2, arm_length=0.2, rotor_force_max=0.8 * 9.81 / 2
+)
+"""A 6-DOF vehicle unlike the paper's: 4.4x the mass, 24-32x the inertia."""
+
+
+@dataclass(frozen=True)
+class FlightSpec:
+    """How to fly the synthetic data.
+
+    Attributes:
+        flights: Number of trajectories.
+        steps: Samples per trajectory.
+        dt: Sample (and input hold) period [s].
+        integrator: One of :data:`INTEGRATORS`.
+        open_loop: Hover thrust plus random sines instead of PD flights.
+        tilt: Target tilt amplitude [rad] (waypoint spread / open-loop attitude sines).
+        excitation: Random input noise, as a fraction of hover thrust (moments scaled alike).
+        drag: Linear drag coefficient c [N s/m] (0: none).
+        seed: Random seed.
+    """
+
+    flights: int = 3
+    steps: int = 1000
+    dt: float = 0.01
+    integrator: str = "rk4"
+    open_loop: bool = False
+    tilt: float = 0.2
+    excitation: float = 0.05
+    drag: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(f"unknown integrator {self.integrator!r}; valid: {INTEGRATORS}")
+
+
+def _step(
+    rhs: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    x: np.ndarray,
+    u: np.ndarray,
+    dt: float,
+    integrator: str,
+) -> np.ndarray:
+    if integrator == "rk4":
+        return rk4_step(rhs, x, u, dt)
+    if integrator == "rk4x10":
+        return rk4_step(rhs, x, u, dt, substeps=10)
+    sol = solve_ivp(lambda _t, y: rhs(y, u), (0.0, dt), x, method="DOP853", rtol=1e-11, atol=1e-12)
+    return sol.y[:, -1]
+
+
+def planar_drag_rhs(params: PlanarQuadParams, drag: float) -> Callable:
+    """The planar rhs with linear drag ``-drag v / m`` on y_dot and z_dot."""
+
+    def rhs(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        out = planar_rhs(x, u, params)
+        if drag:
+            out = out.copy()
+            out[..., 3:5] -= (drag / params.mass) * np.asarray(x)[..., 3:5]
+        return out
+
+    return rhs
+
+
+def quad6dof_drag_rhs(params: Quad6DOFParams, drag: float) -> Callable:
+    """The 6-DOF rhs with linear drag ``-drag v_body / m`` on u, v, w."""
+
+    def rhs(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        out = quad6dof_rhs(x, u, params)
+        if drag:
+            out = out.copy()
+            out[..., 6:9] -= (drag / params.mass) * np.asarray(x)[..., 6:9]
+        return out
+
+    return rhs
+
+
+def _open_loop_inputs(
+    rng: np.random.Generator, t: np.ndarray, hover: float, inertia: np.ndarray, tilt: float
+) -> np.ndarray:
+    """Hover thrust +-15 % and moments that swing each angle by about ``tilt`` (sines)."""
+    cols = [hover * (1.0 + 0.15 * _sines(rng, t, 3))]
+    for inertia_i in inertia:
+        freqs = rng.uniform(1.0, 4.0, size=3) * 2 * np.pi
+        phases = rng.uniform(0, 2 * np.pi, size=3)
+        amps = tilt / 3 * rng.uniform(0.5, 1.0, size=3)
+        # angle(t) = sum a sin(w t + p)  ->  moment = -I sum a w^2 sin(w t + p)
+        moment = -(amps * freqs**2 * np.sin(np.outer(t, freqs) + phases)).sum(axis=1)
+        cols.append(inertia_i * moment)
+    return np.column_stack(cols)
+
+
+def _sines(rng: np.random.Generator, t: np.ndarray, count: int) -> np.ndarray:
+    freqs = rng.uniform(0.3, 2.0, size=count) * 2 * np.pi
+    phases = rng.uniform(0, 2 * np.pi, size=count)
+    return np.sin(np.outer(t, freqs) + phases).sum(axis=1) / count
+
+
+def _fly(
+    rhs: Callable,
+    saturate: Callable,
+    controller: Callable | None,
+    refs: np.ndarray | None,
+    open_u: np.ndarray | None,
+    x0: np.ndarray,
+    noise: np.ndarray,
+    spec: FlightSpec,
+) -> tuple[np.ndarray, np.ndarray]:
+    n = spec.steps
+    states = np.empty((n, x0.size))
+    applied = np.empty((n, noise.shape[1]))
+    x = x0
+    for k in range(n):
+        states[k] = x
+        command = controller(x, refs[k]) if controller is not None else open_u[k]
+        applied[k] = saturate(command + noise[k])
+        x = _step(rhs, x, applied[k], spec.dt, spec.integrator)
+    return states, applied
+
+
+def planar_flights(
+    params: PlanarQuadParams = OTHER_PLANAR, spec: FlightSpec = FlightSpec()
+) -> list[Trajectory]:
+    """Planar flights of ``params`` (closed loop by default), applied inputs recorded.
+
+    Args:
+        params: The vehicle.
+        spec: Number, length, integrator, excitation, drag, seed.
+
+    Returns:
+        ``spec.flights`` trajectories of ``spec.steps`` samples (names as the planar preset).
+    """
+    rng = np.random.default_rng(spec.seed)
+    rhs = planar_drag_rhs(params, spec.drag)
+    sat = lambda u: saturate_planar(u, params)  # noqa: E731
+    t = np.arange(spec.steps) * spec.dt
+    scale = np.array([params.hover_thrust, params.Ixx * 20.0]) * spec.excitation
+    trajs = []
+    for _ in range(spec.flights):
+        noise = rng.normal(size=(spec.steps, 2)) * scale
+        x0 = np.zeros(6)
+        x0[1] = 1.0
+        if spec.open_loop:
+            u = _open_loop_inputs(rng, t, params.hover_thrust, np.array([params.Ixx]), spec.tilt)
+            states, applied = _fly(rhs, sat, None, None, u, x0, noise * 0.2, spec)
+        else:
+            # waypoint spread sets the tilt: a_y ~ g tilt needs ~ tilt g / Kp_y metres
+            half = spec.tilt * params.gravity / 60.0 * 6.0
+            ref = RandomWaypoints.sample(
+                rng, 2, int(spec.steps * spec.dt / 1.5) + 2, (-half, 1.0 - half),
+                (half, 1.0 + half), 1.5,
+            )  # fmt: skip
+            states, applied = _fly(rhs, sat, PlanarPD(params), ref(t), None, x0, noise, spec)
+        trajs.append(
+            Trajectory(t, states, applied, PLANAR_STATE_NAMES, PLANAR_INPUT_NAMES, meta={})
+        )
+    return trajs
+
+
+def quad6dof_flights(
+    params: Quad6DOFParams = OTHER_6DOF, spec: FlightSpec = FlightSpec(flights=4)
+) -> list[Trajectory]:
+    """6-DOF flights of ``params`` (closed loop by default, yaw sweep), applied inputs recorded.
+
+    Args:
+        params: The vehicle.
+        spec: Number, length, integrator, excitation, drag, seed.
+
+    Returns:
+        ``spec.flights`` trajectories of ``spec.steps`` samples (names as the 6-DOF preset).
+    """
+    rng = np.random.default_rng(spec.seed)
+    rhs = quad6dof_drag_rhs(params, spec.drag)
+    sat = lambda u: saturate_quad6dof(u, params)  # noqa: E731
+    t = np.arange(spec.steps) * spec.dt
+    scale = (
+        np.array([params.hover_thrust, params.Jxx * 20, params.Jyy * 20, params.Jzz * 10])
+        * spec.excitation
+    )
+    trajs = []
+    for _ in range(spec.flights):
+        noise = rng.normal(size=(spec.steps, 4)) * scale
+        x0 = np.zeros(12)
+        x0[2] = 1.0
+        if spec.open_loop:
+            u = _open_loop_inputs(rng, t, params.hover_thrust, params.inertia, spec.tilt)
+            states, applied = _fly(rhs, sat, None, None, u, x0, noise * 0.2, spec)
+        else:
+            half = spec.tilt * params.gravity / 20.0 * 4.0
+            ref = RandomWaypoints.sample(
+                rng, 3, int(spec.steps * spec.dt / 1.5) + 2, (-half, -half, 1.0 - half),
+                (half, half, 1.0 + half), 1.5, yaw_amplitude=0.6, yaw_period=5.0,
+            )  # fmt: skip
+            ctrl = Quad6DOFPD(params)
+            states, applied = _fly(rhs, sat, ctrl, ref(t), None, x0, noise, spec)
+        trajs.append(
+            Trajectory(t, states, applied, QUAD6DOF_STATE_NAMES, QUAD6DOF_INPUT_NAMES, meta={})
+        )
+    return trajs
+
+
+def add_noise(trajs: Sequence[Trajectory], sigma: float, seed: int = 7) -> list[Trajectory]:
+    """Gaussian state noise of standard deviation ``sigma`` on every state (not on inputs)."""
+    rng = np.random.default_rng(seed)
+    return [
+        Trajectory(
+            tr.t,
+            tr.x + sigma * rng.standard_normal(tr.x.shape),
+            tr.u,
+            tr.state_names,
+            tr.input_names,
+            meta={**tr.meta, "noise": sigma},
+        )  # fmt: skip
+        for tr in trajs
+    ]
+
+
+def truth_planar(params: PlanarQuadParams = OTHER_PLANAR, drag: float = 0.0) -> dict:
+    """True planar model {state: {feature: coefficient}}, with the drag terms when drag > 0."""
+    m = params.mass
+    truth: dict[str, dict[str, float]] = {
+        "y": {"y_dot": 1.0},
+        "z": {"z_dot": 1.0},
+        "phi": {"phi_dot": 1.0},
+        "y_dot": {"sin(phi) u1": -1.0 / m},
+        "z_dot": {"1": -params.gravity, "cos(phi) u1": 1.0 / m},
+        "phi_dot": {"u2": 1.0 / params.Ixx},
+    }
+    if drag:
+        truth["y_dot"]["y_dot"] = -drag / m
+        truth["z_dot"]["z_dot"] = -drag / m
+    return truth
+
+
+def truth_quad6dof(params: Quad6DOFParams = OTHER_6DOF, drag: float = 0.0) -> dict:
+    """True 6-DOF model {state: {feature: coefficient}} (36 terms, 39 with drag)."""
+    from identification.experiments.truth import quad6dof_truth
+
+    truth = {k: dict(v) for k, v in quad6dof_truth(params).items()}
+    if drag:
+        for name in ("u", "v", "w"):
+            truth[name][name] = -drag / params.mass
+    return truth
+
+
+@dataclass(frozen=True)
+class SupportCheck:
+    """A model against a known truth.
+
+    Attributes:
+        missed: True terms the model lacks, as ``state: term``.
+        spurious: Terms the model has that the truth lacks.
+        max_rel_error: Largest |found - true| / |true| over the true terms (inf if one missed).
+        n_terms: Non-zero terms of the model.
+    """
+
+    missed: tuple[str, ...]
+    spurious: tuple[str, ...]
+    max_rel_error: float
+    n_terms: int
+
+    @property
+    def exact_support(self) -> bool:
+        """No term missed, none spurious."""
+        return not self.missed and not self.spurious
+
+    @property
+    def off(self) -> int:
+        """Missed plus spurious terms."""
+        return len(self.missed) + len(self.spurious)
+
+
+def check_support(model: object, truth: dict[str, dict[str, float]]) -> SupportCheck:
+    """Compares a model's coefficients with a truth {state: {feature: value}} by canonical term."""
+    from identification.features import parse_term
+
+    found: dict[tuple[str, object], float] = {}
+    for i, state in enumerate(model.state_names):  # type: ignore[attr-defined]
+        for j, name in enumerate(model.feature_names):  # type: ignore[attr-defined]
+            c = float(model.coefficients[i, j])  # type: ignore[attr-defined]
+            if c != 0.0:
+                key = (state, parse_term(name))
+                found[key] = found.get(key, 0.0) + c
+    true = {(s, parse_term(n)): v for s, terms in truth.items() for n, v in terms.items()}
+    missed = tuple(f"{s}: {_name(t)}" for s, t in true if (s, t) not in found)
+    spurious = tuple(f"{s}: {_name(t)}" for s, t in found if (s, t) not in true)
+    errors = [abs(found.get(k, 0.0) - v) / abs(v) for k, v in true.items()]
+    worst = float("inf") if missed else float(max(errors, default=0.0))
+    return SupportCheck(missed, spurious, worst, len(found))
+
+
+def _name(term: object) -> str:
+    from identification.features import term_name
+
+    return term_name(term)  # type: ignore[arg-type]
+
+
+def rhs_error(model: object, truth_rhs: Callable, trajs: Sequence[Trajectory]) -> float:
+    """Largest relative error of the model's rhs on the data: max|f - f_true| / max|f_true|."""
+    x = np.concatenate([tr.x for tr in trajs])
+    u = np.concatenate([tr.u for tr in trajs])
+    true = truth_rhs(x, u)
+    diff = model.rhs(x, u) - true  # type: ignore[attr-defined]
+    return float(np.max(np.abs(diff).max(axis=0) / np.maximum(np.abs(true).max(axis=0), 1e-12)))

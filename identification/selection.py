@@ -1,0 +1,493 @@
+"""Model selection from the user's data alone: cross-validated multi-step prediction.
+
+Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry point:
+
+1. **Folds.** With three or more trajectories (segments), whole trajectories are held out in
+   turn (k-fold over trajectories, k <= ``folds``); with fewer, each trajectory is cut into
+   contiguous blocks and blocks are held out.
+2. **Candidates.** Every integral window in ``windows`` times every threshold in
+   ``lambdas``. For each window the RK4 stage points come from a dense least-squares pilot
+   fit on all data (they only need an accurate rhs, not a sparse one); the regression of each
+   fold is then a sum of per-trajectory triangular factors (:class:`identification.fit.Gram`),
+   so a candidate costs one small p x p sparse solve.
+3. **Score.** Multi-step open-loop prediction on the held-out data: from start points spread
+   over each held-out trajectory, the candidate is integrated by RK4 with the *recorded*
+   inputs for ``horizon`` steps; the error of every state, divided by that state's standard
+   deviation over the data, is averaged over states, steps and starts (root mean square).
+   A prediction that leaves finite numbers or grows past 1e3 state deviations scores inf.
+4. **Rule: one standard error.** Among candidates whose mean fold score is within one
+   standard error (over folds) of the best mean, the one with the fewest terms (fitted on all
+   data) wins; ties go to the lower mean. Sparser models that predict as well as the best,
+   within what the folds can resolve, are preferred.
+5. **Final model.** The chosen window and threshold are refitted on all data (full RK4 fixed
+   point). Near-collinear pairs on the data (``1`` / ``cos(phi)``, ``u2`` / ``cos(phi) u2``:
+   columns with |cosine| > 0.999, one term the other times more factors) are resolved towards
+   the simpler term when an F-test on the residuals (p = 0.001, with rows / window effective
+   samples) cannot tell them apart; each case is reported as a warning naming the pair.
+6. **Uncertainty (E-SINDy).** A block bootstrap (whole blocks of rows, drawn with
+   replacement) refits the chosen candidate ``n_models`` times; each coefficient's spread and
+   inclusion probability go into the model; terms kept in fewer than half of the bags are
+   dropped (E-SINDy's inclusion threshold).
+
+Scores, the rule and the warnings go into ``model.meta["selection"]`` (JSON-safe).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from identification.data import Trajectory
+from identification.features import compile_rhs, parse_term, term_name
+from identification.fit import (
+    TALLY,
+    FitConfig,
+    Gram,
+    check_identifiable,
+    fit_coefficients,
+    grams,
+    solve,
+)
+from identification.model import IdentifiedModel, json_safe
+
+SELECT_LAMBDAS: tuple[float, ...] = tuple(float(v) for v in np.logspace(-6, 0, 13))
+"""Scaled thresholds tried by default (half decades from 1e-6 to 1)."""
+
+WINDOWS: tuple[int, ...] = (1, 4, 16)
+"""Integral windows tried by default (1: clean data; longer: noise)."""
+
+F_CRITICAL = 10.83
+"""F(1, inf) quantile at p = 0.001: a swap to the simpler term of a near-collinear pair is
+refused when the residual grows by more than this many residual variances."""
+
+
+@dataclass
+class Candidate:
+    """One scored candidate.
+
+    Attributes:
+        window: Integral window.
+        lam: Scaled threshold.
+        n_terms: Terms of the fit on all data.
+        fold_scores: Validation score of each fold (inf: diverged).
+        mean: Mean fold score.
+        se: Standard error of the mean over folds.
+    """
+
+    window: int
+    lam: float
+    n_terms: int
+    fold_scores: list[float]
+    mean: float = field(init=False)
+    se: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        scores = np.asarray(self.fold_scores)
+        if np.isfinite(scores).all():
+            self.mean = float(scores.mean())
+            self.se = float(scores.std(ddof=1) / np.sqrt(scores.size)) if scores.size > 1 else 0.0
+        else:
+            self.mean = self.se = float("inf")
+
+
+@dataclass
+class SelectionReport:
+    """What :func:`select_model` tried and why it chose what it chose.
+
+    Attributes:
+        candidates: Every scored candidate.
+        chosen: Index of the chosen candidate.
+        folds: Number of folds.
+        horizon: Prediction horizon [steps].
+        rule: The selection rule, in words.
+        warnings: Near-collinear pairs resolved, dropped terms, optimizer warnings.
+    """
+
+    candidates: list[Candidate]
+    chosen: int
+    folds: int
+    horizon: int
+    rule: str
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def best(self) -> Candidate:
+        """The chosen candidate."""
+        return self.candidates[self.chosen]
+
+    def to_meta(self) -> dict[str, Any]:
+        """JSON-safe summary (non-finite scores become null)."""
+        return json_safe(
+            {
+                "rule": self.rule,
+                "folds": self.folds,
+                "horizon": self.horizon,
+                "chosen": {"window": self.best.window, "lambda": self.best.lam,
+                           "n_terms": self.best.n_terms, "score": self.best.mean,
+                           "se": self.best.se},
+                "candidates": [
+                    {"window": c.window, "lambda": c.lam, "n_terms": c.n_terms,
+                     "score": c.mean, "se": c.se}
+                    for c in self.candidates
+                ],
+                "warnings": self.warnings,
+            }
+        )  # fmt: skip
+
+    def plot(self, path: str | Path) -> Path:
+        """Validation error against number of terms, one series per window, choice marked."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        from quad_envs.fileio import atomic_write_bytes
+
+        fig, ax = plt.subplots(figsize=(6.4, 4.2))
+        for w in sorted({c.window for c in self.candidates}):
+            cs = [c for c in self.candidates if c.window == w and np.isfinite(c.mean)]
+            if cs:
+                ax.errorbar([c.n_terms for c in cs], [c.mean for c in cs],
+                            yerr=[c.se for c in cs], fmt="o", ms=4, capsize=2,
+                            label=f"window {w}")  # fmt: skip
+        b = self.best
+        ax.plot([b.n_terms], [b.mean], "r*", ms=16, label=f"chosen: {b.n_terms} terms")
+        ax.axhline(b.mean + b.se, color="0.6", lw=0.8, ls="--")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("terms in the model (fit on all data)")
+        ax.set_ylabel(f"held-out {self.horizon}-step prediction error (normalised)")
+        ax.set_title("Model selection: cross-validated prediction error")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format="png", dpi=120)
+        plt.close(fig)
+        return atomic_write_bytes(path, buffer.getvalue())
+
+
+# -- folds and scores -------------------------------------------------------------------
+def make_units(trajs: Sequence[Trajectory], folds: int, min_rows: int) -> list[Trajectory]:
+    """Whole trajectories when there are at least 3, else contiguous blocks of them."""
+    if len(trajs) >= 3:
+        return list(trajs)
+    total = sum(len(t) for t in trajs)
+    units = []
+    for tr in trajs:
+        pieces = max(1, int(round(folds * len(tr) / total)))
+        pieces = min(pieces, max(1, len(tr) // min_rows))
+        edges = np.linspace(0, len(tr), pieces + 1).astype(int)
+        units += [tr.slice(a, b) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    return units
+
+
+def prediction_score(
+    rhs: Any,
+    held_out: Sequence[Trajectory],
+    scale: np.ndarray,
+    horizon: int,
+    max_starts: int = 64,
+) -> float:
+    """RMS over starts, steps and states of the normalised ``horizon``-step prediction error.
+
+    Args:
+        rhs: Compiled rhs(x, u) of the candidate.
+        held_out: Trajectories to predict (recorded inputs, each row's own step).
+        scale: Per-state normaliser (standard deviation over the data).
+        horizon: Steps to predict from each start.
+        max_starts: Start points per trajectory (evenly spread).
+
+    Returns:
+        The score (inf if the prediction diverged).
+    """
+    total, count = 0.0, 0
+    with np.errstate(all="ignore"):
+        for tr in held_out:
+            h_len = min(horizon, len(tr) - 1)
+            n_starts = len(tr) - h_len
+            starts = np.unique(np.linspace(0, n_starts - 1, min(max_starts, n_starts)).astype(int))
+            x = tr.x[starts]
+            steps = np.diff(tr.t)
+            for j in range(h_len):
+                u = tr.u[starts + j]
+                h = steps[starts + j][:, None]
+                k1 = rhs(x, u)
+                k2 = rhs(x + 0.5 * h * k1, u)
+                k3 = rhs(x + 0.5 * h * k2, u)
+                k4 = rhs(x + h * k3, u)
+                x = x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
+                err = (x - tr.x[starts + j + 1]) / scale
+                sq = float(np.sum(err**2))
+                if not np.isfinite(sq) or sq > 1e6 * err.size:
+                    return float("inf")
+                total += sq
+                count += err.size
+    return float(np.sqrt(total / max(count, 1)))
+
+
+def choose_one_se(candidates: Sequence[Candidate]) -> int:
+    """Index of the sparsest candidate within one standard error of the best mean score."""
+    means = np.array([c.mean for c in candidates])
+    if not np.isfinite(means).any():
+        raise ValueError(
+            "every candidate model diverged when predicting the held-out data: the library "
+            "may not contain the dynamics, or the data are too short or too noisy"
+        )
+    best = int(np.nanargmin(means))
+    limit = candidates[best].mean + candidates[best].se
+    ok = [i for i, c in enumerate(candidates) if c.mean <= limit * (1 + 1e-12)]
+    return min(ok, key=lambda i: (candidates[i].n_terms, candidates[i].mean))
+
+
+# -- near-collinear pairs ---------------------------------------------------------------
+def collinear_pairs(
+    gram: Gram, feature_names: Sequence[str], threshold: float = 0.999
+) -> list[tuple[int, int, float]]:
+    """(simple, complex, |cosine|) for columns nearly parallel on the data.
+
+    Only pairs where the complex term is the simple one times further factors count (e.g.
+    ``u2`` and ``cos(phi) u2``; ``1`` and ``cos(phi)``).
+    """
+    terms = [set(parse_term(n)) for n in feature_names]
+    r = gram.r / np.maximum(gram.col_norms, 1e-300)
+    cos = np.abs(r.T @ r)
+    out = []
+    for a, b in zip(*np.nonzero(np.triu(cos > threshold, 1)), strict=True):
+        ta, tb = terms[a], terms[b]
+        if ta < tb:
+            out.append((int(a), int(b), float(cos[a, b])))
+        elif tb < ta:
+            out.append((int(b), int(a), float(cos[a, b])))
+    return out
+
+
+def _rss(a: np.ndarray, b: np.ndarray, cols: list[int]) -> tuple[float, np.ndarray]:
+    if not cols:
+        return float(b @ b), np.zeros(0)
+    coef = np.linalg.lstsq(a[:, cols], b, rcond=None)[0]
+    resid = b - a[:, cols] @ coef
+    return float(resid @ resid), coef
+
+
+def resolve_collinear(
+    xi: np.ndarray,
+    gram: Gram,
+    feature_names: Sequence[str],
+    state_names: Sequence[str],
+    window: int,
+) -> tuple[np.ndarray, list[str]]:
+    """Prefers the simpler term of each near-collinear pair the data cannot tell apart.
+
+    Returns:
+        The coefficients (refitted where changed) and one warning per resolved pair.
+    """
+    pairs = collinear_pairs(gram, feature_names)
+    if not pairs:
+        return xi, []
+    a, z = gram.r, gram.z
+    rss_floor = np.linalg.norm(gram.r_aug[:, gram.p :], axis=0) ** 2  # total, for the bound
+    n_eff = max(gram.rows / window, 2.0)
+    xi = xi.copy()
+    notes = []
+    for i, state in enumerate(state_names):
+        support = list(np.flatnonzero(xi[i]))
+        for simple, complex_, cosine in pairs:
+            if complex_ not in support:
+                continue
+            trial = [c for c in support if c != complex_]
+            if simple not in trial:
+                trial.append(simple)
+            rss, _ = _rss(a, z[:, i], support)
+            rss_new, _ = _rss(a, z[:, i], trial)
+            # residual left outside the p-dimensional range of R: (total - explained)
+            outside = max(rss_floor[i] - float(z[:, i] @ z[:, i]), 0.0)
+            sigma2 = (rss + outside) / max(n_eff - len(support), 1.0)
+            if (rss_new - rss) <= F_CRITICAL * sigma2:
+                support = sorted(trial)
+                kept = "both" if simple in np.flatnonzero(xi[i]) else "the complex one"
+                notes.append(
+                    f"{state}': {term_name(parse_term(feature_names[simple]))!r} and "
+                    f"{term_name(parse_term(feature_names[complex_]))!r} are nearly collinear "
+                    f"on this data (|cos| = {cosine:.6f}; the fit had {kept}): kept the "
+                    "simpler term"
+                )
+        if sorted(support) != list(np.flatnonzero(xi[i])):
+            row = np.zeros(xi.shape[1])
+            if support:
+                row[support] = _rss(a, z[:, i], support)[1]
+            xi[i] = row
+    return xi, notes
+
+
+# -- the entry point --------------------------------------------------------------------
+def select_model(
+    trajs: Sequence[Trajectory],
+    library: Sequence[str],
+    *,
+    config: FitConfig | None = None,
+    lambdas: Sequence[float] = SELECT_LAMBDAS,
+    windows: Sequence[int] = WINDOWS,
+    folds: int = 5,
+    horizon: int = 20,
+    n_models: int = 20,
+    seed: int = 0,
+    system: str | None = None,
+    progress: bool = False,
+) -> tuple[IdentifiedModel, SelectionReport]:
+    """Identifies a model and chooses its sparsity and window from the data alone.
+
+    Args:
+        trajs: The data (one or more trajectories / clean segments, same variables).
+        library: Candidate feature names.
+        config: Base fit settings (formulation and optimizer); ``lam`` and ``window`` are
+            chosen here. Default: the RK4 formulation with STLSQ.
+        lambdas: Scaled thresholds to try.
+        windows: Integral windows to try.
+        folds: Largest number of folds.
+        horizon: Prediction horizon of the score [steps].
+        n_models: Bootstrap bags for the coefficient uncertainty (0: none).
+        seed: Seed of the bootstrap.
+        system: Optional vehicle label stored in the model.
+        progress: Show a progress bar.
+
+    Returns:
+        The model (scores in ``meta["selection"]``, ensemble statistics attached) and the
+        report.
+
+    Raises:
+        ValueError: Unidentifiable data (see :func:`identification.fit.check_identifiable`)
+            or every candidate diverged.
+    """
+    from tqdm import tqdm
+
+    if not trajs:
+        raise ValueError("no trajectories to fit")
+    first = trajs[0]
+    if any((t.state_names, t.input_names) != (first.state_names, first.input_names) for t in trajs):
+        raise ValueError("all trajectories must have the same state and input names")
+    variables = [*first.state_names, *first.input_names]
+    names = [term_name(parse_term(n, variables)) for n in library]
+    base = config or FitConfig(optimizer="stlsq")
+    TALLY.counts.clear()
+    check_identifiable(Gram.stack(grams(trajs, names, "forward", 1)), names, trajs)
+    shortest = min(len(t) for t in trajs)
+    windows = sorted({int(w) for w in windows if 0 < w < max(shortest // 4, 2)}) or [1]
+    horizon = int(max(1, min(horizon, shortest // 2)))
+    units = make_units(trajs, folds, min_rows=max(2 * horizon, 4 * max(windows), 20))
+    k = min(folds, len(units))
+    fold_of = np.arange(len(units)) % k
+    x_all = np.concatenate([t.x for t in trajs])
+    scale = x_all.std(axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+
+    candidates: list[Candidate] = []
+    steps = tqdm(total=len(windows) * (k + 1), desc="selecting", disable=not progress)
+    for w in windows:
+        pilot = fit_coefficients(units, names, dataclasses.replace(base, lam=0.0, window=w,
+                                                                    iterations=2))  # fmt: skip
+        unit_grams = grams(units, names, base.derivative if base.derivative != "rk4" else "rk4",
+                           w, pilot)  # fmt: skip
+        scores = np.full((len(lambdas), k), np.inf)
+        for f in range(k):
+            train = Gram.stack([g for g, fo in zip(unit_grams, fold_of, strict=True) if fo != f])
+            held = [u for u, fo in zip(units, fold_of, strict=True) if fo == f]
+            for li, lam in enumerate(lambdas):
+                cfg = dataclasses.replace(base, lam=float(lam), window=w)
+                try:
+                    xi = solve(train, cfg)
+                    rhs = compile_rhs(names, xi, first.state_names, first.input_names)
+                    scores[li, f] = prediction_score(rhs, held, scale, horizon)
+                except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+                    scores[li, f] = np.inf
+            steps.update()
+        full = Gram.stack(unit_grams)
+        for li, lam in enumerate(lambdas):
+            xi = solve(full, dataclasses.replace(base, lam=float(lam), window=w))
+            candidates.append(Candidate(w, float(lam), int(np.count_nonzero(xi)),
+                                        list(scores[li])))  # fmt: skip
+        steps.update()
+    steps.close()
+    chosen = choose_one_se(candidates)
+    best = candidates[chosen]
+    rule = (
+        f"{k}-fold cross-validation over {'trajectories' if len(trajs) >= 3 else 'blocks'}; "
+        f"score = RMS of the {horizon}-step open-loop prediction error normalised by each "
+        "state's standard deviation; chosen: the fewest terms within one standard error of "
+        "the best mean score"
+    )
+    report = SelectionReport(candidates, chosen, k, horizon, rule)
+
+    final_cfg = dataclasses.replace(base, lam=best.lam, window=best.window)
+    xi = fit_coefficients(trajs, names, final_cfg)
+    final_gram = Gram.stack(grams(trajs, names, "rk4", best.window, xi))
+    xi, notes = resolve_collinear(xi, final_gram, names, first.state_names, best.window)
+    report.warnings += notes
+    std = prob = None
+    if n_models > 0:
+        xi, std, prob, dropped = _bootstrap(trajs, names, final_cfg, xi, n_models, seed)
+        report.warnings += dropped
+    tally = TALLY.summary()
+    if tally:
+        report.warnings.append(tally)
+    meta = {
+        **final_cfg.label,
+        "n_trajectories": len(trajs),
+        "n_samples": int(sum(len(t) for t in trajs)),
+        "dt": first.dt,
+        "selection": report.to_meta(),
+    }
+    model = IdentifiedModel(names, xi, first.state_names, first.input_names, system, meta,
+                            std, prob)  # fmt: skip
+    return model, report
+
+
+def _bootstrap(
+    trajs: Sequence[Trajectory],
+    names: list[str],
+    config: FitConfig,
+    xi: np.ndarray,
+    n_models: int,
+    seed: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """Block bootstrap of the chosen fit: spread, inclusion probability, E-SINDy thresholding."""
+    w = config.window
+    n_blocks = 40 if len(names) < 100 else 12
+    total = sum(len(t) for t in trajs)
+    size = max(4 * w, total // n_blocks, 10)
+    blocks = []
+    for tr in trajs:
+        for s in range(0, len(tr) - w - 1, size):
+            stop = min(s + size + w, len(tr))
+            if stop - s > w + 1:
+                blocks.append(tr.slice(s, stop))
+    block_grams = grams(blocks, names, "rk4", w, xi)
+    rng = np.random.default_rng(seed)
+    bags = []
+    for _ in range(n_models):
+        weights = rng.multinomial(len(blocks), np.full(len(blocks), 1.0 / len(blocks)))
+        bags.append(solve(Gram.stack(block_grams, list(weights.astype(float))), config))
+    bags_a = np.array(bags)
+    prob = np.mean(bags_a != 0, axis=0)
+    std = bags_a.std(axis=0)
+    notes = []
+    weak = (xi != 0) & (prob < 0.5)
+    if weak.any():
+        full = Gram.stack(block_grams)
+        a, z = full.r, full.z
+        xi = xi.copy()
+        for i in np.unique(np.nonzero(weak)[0]):
+            cols = [c for c in np.flatnonzero(xi[i]) if not weak[i, c]]
+            row = np.zeros(xi.shape[1])
+            if cols:
+                row[cols] = np.linalg.lstsq(a[:, cols], z[:, i], rcond=None)[0]
+            xi[i] = row
+        for i, j in zip(*np.nonzero(weak), strict=True):
+            notes.append(f"dropped term {names[j]!r} of equation {i}: kept in {prob[i, j]:.0%} "
+                         "of bootstrap fits")  # fmt: skip
+    return xi, std, prob, notes
