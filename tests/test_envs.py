@@ -219,3 +219,16 @@ def test_make_without_import_and_render():
         "assert img.std() > 0\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, env={"MPLBACKEND": "Agg", "PATH": ""})
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_record_video_writes_a_real_time_video(env_id, tmp_path):
+    env = gym.make(env_id, render_mode="rgb_array")
+    assert env.metadata["render_fps"] == 100  # one frame per 0.01 s control step
+    env = gym.wrappers.RecordVideo(env, str(tmp_path), disable_logger=True)
+    env.reset(seed=0)
+    for _ in range(10):
+        env.step(env.action_space.sample())
+    env.close()
+    videos = list(tmp_path.glob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 0

@@ -91,9 +91,12 @@ def quad6dof_library() -> list[str]:
 
 
 def quad6dof_rotor_points(state: FloatArray, params: Quad6DOFParams) -> FloatArray:
-    """The four rotors (+x, -x, +y, -y arms) in space."""
+    """The four rotors in space ('+': on the body axes; 'x': on the diagonals)."""
     rot = dynamics.rotation_zxy(state[3], state[4], state[5])
-    arms = params.arm_length * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]])
+    if params.frame == "x":  # motor order 1 front-right, 2 back-right, 3 back-left, 4 front-left
+        arms = params.arm_length * np.array([[1, -1, 0], [-1, -1, 0], [-1, 1, 0], [1, 1, 0]])
+    else:  # rotor 1 on +x, 2 on +y, 3 on -x, 4 on -y
+        arms = params.arm_length * np.array([[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]])
     return state[0:3] + arms @ rot.T
 
 
