@@ -256,8 +256,9 @@ def identify(
     """Fits candidates on ``train``; chooses on ``validation`` (held-out training flights).
 
     Stage 1, for every actuator time constant in ``taus``: equation-error STLSQ, then
-    refinement on ``horizon``-step windows (every ``stride``-th sample). Stage 2, for the best
-    tau: prune at each of ``prune_fractions`` and refine again. The score is the mean over
+    ``iterations // 2`` refinement steps on ``horizon``-step windows (every ``stride``-th
+    sample). Stage 2, for the best tau: prune at each of ``prune_fractions`` and refine for
+    ``iterations`` steps. The score is the mean over
     groups of SimErr / hold SimErr on the validation flights; among candidates with at most
     ``max_terms`` terms (else the sparsest) the lowest score wins.
 
@@ -281,21 +282,22 @@ def identify(
         prog.say(f"tau {cand.tau * 1e3:.0f} ms, {label}: {cand.n_terms} terms, score {value:.3f}")
         return value
 
-    def fit_refine(model: RotorcraftModel) -> RotorcraftModel:
+    def fit_refine(model: RotorcraftModel, steps: int) -> RotorcraftModel:
         windows = make_windows(train, horizon, stride, model.actuator_states)
-        return refine(model, windows, loss_scales(windows), iterations, progress=_ticker(prog))
+        return refine(model, windows, loss_scales(windows), steps, progress=_ticker(prog))
 
     stage1 = []
     for tau in taus:
         prog.say(f"tau {tau * 1e3:.0f} ms: equation error + simulation-error refinement")
-        model = fit_refine(fit_equation_error(train, tau, threshold))
+        # Half the iterations to rank the time constants; the winner is refined further.
+        model = fit_refine(fit_equation_error(train, tau, threshold), max(iterations // 2, 1))
         stage1.append((score(model, "refined"), model))
     _, best = min(stage1, key=lambda pair: pair[0])
     candidates = [(records[taus.index(best.tau)]["score"], best)]
     for frac in prune_fractions:
         pruned = prune(best, train, frac)
         prog.say(f"tau {best.tau * 1e3:.0f} ms: pruned at {frac:g} to {pruned.n_terms} terms")
-        pruned = fit_refine(pruned)
+        pruned = fit_refine(pruned, iterations)
         pruned.meta["pruned_fraction"] = frac
         candidates.append((score(pruned, f"pruned {frac:g}"), pruned))
     eligible = [c for c in candidates if c[1].n_terms <= max_terms]
@@ -381,7 +383,8 @@ def run_benchmark(
             f"need at least two training flights of some family in {data_dir}, "
             f"got {len(train_paths)}"
         )
-    steps = (len(taus) + len(prune_fractions) + int(refit_all)) * (iterations + 6) + 12
+    steps = len(taus) * (iterations // 2 + 3)
+    steps += (len(prune_fractions) + int(refit_all)) * (iterations + 6) + 12
     prog = _Progress(steps, progress)
     threads = torch.get_num_threads()
     # Small batched ops: one thread is fastest, and it does not fight other jobs for cores.
@@ -451,7 +454,7 @@ def run_benchmark(
     )
     if figures:
         plot_error_vs_horizon(results, out / "error_vs_horizon.png")
-        plot_windows(model, tests[0], out / "windows.png", horizon)
+        plot_windows(model, tests, out / "windows.png", horizon)
     atomic_write_text(out / "report.md", report_markdown(metrics, model))
     return metrics
 
@@ -581,48 +584,50 @@ def plot_error_vs_horizon(results: dict[str, dict[str, np.ndarray]], path: Path)
 
 
 def plot_windows(
-    model: RotorcraftModel, traj: Trajectory, path: Path, horizon: int = HORIZON, count: int = 4
+    model: RotorcraftModel, trajs: Sequence[Trajectory], path: Path, horizon: int = HORIZON
 ) -> Path:
-    """Predicted against measured over a few 0.5 s windows of one test flight."""
+    """Predicted against measured over one 0.5 s window of each test flight (up to four).
+
+    The window of a flight starts where its roll and pitch rates are largest (the hardest
+    part for the rotational dynamics), away from the ends.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    starts = np.linspace(200, len(traj) - horizon - 200, count).astype(int)
-    act = model.actuator_states(traj.u)
-    panels = [
-        (2, "z [m]"),
-        (3, "phi [rad]"),
-        (4, "theta [rad]"),
-        (9, "p [rad/s]"),
-        (10, "q [rad/s]"),
-    ]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 2.0 * len(panels)), sharex=True)
-    t = traj.t
+    panels = [(0, "x [m]"), (2, "z [m]"), (3, "phi [rad]"), (4, "theta [rad]")]
+    panels += [(9, "p [rad/s]"), (10, "q [rad/s]")]
+    flights = list(trajs)[:4]
+    fig, axes = plt.subplots(
+        len(panels), len(flights), figsize=(3.6 * len(flights), 1.7 * len(panels)),
+        sharex=True, squeeze=False,
+    )  # fmt: skip
+    steps = np.arange(horizon + 1) * model.dt
     with torch.no_grad():
-        for k, s in enumerate(starts):
-            seg = slice(s, s + horizon + 1)
-            pred = model.rollout(traj.x[s : s + 1], act[s : s + 1], traj.u[None, s : s + horizon])
-            phys = physics_rollout(traj.x[s : s + 1], traj.u[None, s : s + horizon])
-            for ax, (col, label) in zip(axes, panels, strict=True):
-                ax.plot(t[seg], traj.x[seg, col], "k", lw=1.2, label="measured" if k == 0 else None)
-                ax.plot(
-                    t[s + 1 : s + horizon + 1],
-                    pred[0, :, col],
-                    "C0",
-                    label="SINDy" if k == 0 else None,
-                )
-                ax.plot(
-                    t[s + 1 : s + horizon + 1],
-                    phys[0, :, col],
-                    "C1--",
-                    label="physics" if k == 0 else None,
-                )
-                ax.set_ylabel(label)
-    axes[0].legend(fontsize=8)
-    axes[0].set_title(f"{Path(traj.meta.get('source', '')).name}: open-loop windows of 0.5 s")
-    axes[-1].set_xlabel("t [s]")
+        for c, traj in enumerate(flights):
+            n = len(traj)
+            rate = np.abs(traj.x[:, 9]) + np.abs(traj.x[:, 10])
+            lo, hi = min(100, n // 4), max(n - horizon - 100, n // 4 + 1)
+            s = lo + int(np.argmax(rate[lo:hi]))
+            act = model.actuator_states(traj.u)
+            u_seq = traj.u[None, s : s + horizon]
+            pred = model.rollout(traj.x[s : s + 1], act[s : s + 1], u_seq)[0].numpy()
+            phys = physics_rollout(traj.x[s : s + 1], u_seq)[0].numpy()
+            pred = np.vstack([traj.x[s], pred])
+            phys = np.vstack([traj.x[s], phys])
+            for r, (col, label) in enumerate(panels):
+                ax = axes[r, c]
+                ax.plot(steps, traj.x[s : s + horizon + 1, col], "k", lw=1.2, label="measured")
+                ax.plot(steps, pred[:, col], "C0", label="SINDy rotorcraft")
+                ax.plot(steps, phys[:, col], "C1--", label="nominal physics")
+                if c == 0:
+                    ax.set_ylabel(label)
+                ax.grid(alpha=0.3)
+            name = Path(traj.meta.get("source", "")).stem
+            axes[0, c].set_title(f"{name}, t0 = {traj.t[s]:.2f} s", fontsize=9)
+            axes[-1, c].set_xlabel("time in window [s]")
+    axes[0, 0].legend(fontsize=7)
     fig.tight_layout()
     return _save(fig, path)
 
