@@ -191,7 +191,7 @@ def clean(
     state_names: Sequence[str],
     input_names: Sequence[str],
     gap_factor: float = 3.0,
-    outlier_z: float = 12.0,
+    outlier_z: float = 50.0,
     min_rows: int = 20,
 ) -> tuple[list[Trajectory], CleanReport]:
     """Splits a raw log into clean segments: stale rows, outliers and gaps removed.

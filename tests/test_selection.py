@@ -1,0 +1,150 @@
+"""Truth-free selection on vehicles that are not the paper's, refusal of unidentifiable data."""
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from identification.data import Trajectory, clean, write_trajectory_csv
+from identification.experiments.synthetic import (
+    OTHER_PLANAR,
+    FlightSpec,
+    add_noise,
+    check_support,
+    planar_drag_rhs,
+    planar_flights,
+    rhs_error,
+    truth_planar,
+)
+from identification.fit import FitConfig, fit
+from identification.libraries import library_from_spec, planar_library
+from identification.model import load_model
+from identification.selection import select_model
+from quad_envs.dynamics import PLANAR_INPUT_NAMES as PI
+from quad_envs.dynamics import PLANAR_STATE_NAMES as PS
+from quad_envs.params import PlanarQuadParams
+from quad_sindy.cli import app
+
+HEAVY = PlanarQuadParams(mass=1.2, Ixx=8e-3, arm_length=0.2, rotor_force_max=1.2 * 9.81)
+"""A second non-paper planar vehicle: 6.7x the mass, 32x the inertia."""
+
+FAST = {"windows": (1, 4), "n_models": 5}
+
+
+@pytest.fixture(scope="module")
+def other_clean():
+    return planar_flights(OTHER_PLANAR, FlightSpec(flights=3, steps=600))
+
+
+def test_selection_finds_the_exact_model_of_another_vehicle(other_clean):
+    model, report = select_model(other_clean, planar_library(), **FAST)
+    check = check_support(model, truth_planar(OTHER_PLANAR))
+    assert check.exact_support, (check.missed, check.spurious)
+    assert rhs_error(model, planar_drag_rhs(OTHER_PLANAR, 0.0), other_clean) < 1e-6
+    # the scores are in the model, JSON-safe, and the choice is the 1-SE sparsest
+    meta = model.meta["selection"]
+    assert meta["chosen"]["n_terms"] == 7 and len(meta["candidates"]) == len(report.candidates)
+    within = [c for c in report.candidates if c.mean <= report.best.mean + report.best.se]
+    assert report.best.n_terms == min(c.n_terms for c in within)
+    assert model.inclusion_probability is not None
+    assert np.all(model.inclusion_probability[model.coefficients != 0] >= 0.5)
+
+
+def test_selection_on_solve_ivp_data_of_a_heavy_vehicle():
+    trajs = planar_flights(HEAVY, FlightSpec(flights=3, steps=600, integrator="solve_ivp", seed=3))
+    model, _ = select_model(trajs, planar_library(), **FAST)
+    check = check_support(model, truth_planar(HEAVY))
+    assert check.exact_support, (check.missed, check.spurious)
+    assert check.max_rel_error < 1e-6
+
+
+def test_drag_terms_found_in_open_loop_data():
+    spec = FlightSpec(flights=3, steps=600, open_loop=True, drag=0.3, seed=1)
+    trajs = planar_flights(OTHER_PLANAR, spec)
+    model, _ = select_model(trajs, planar_library(), **FAST)
+    check = check_support(model, truth_planar(OTHER_PLANAR, drag=0.3))
+    assert check.exact_support, (check.missed, check.spurious)
+    assert check.max_rel_error < 1e-6
+
+
+def test_one_long_log_is_cut_into_blocks_and_slight_noise_keeps_the_support():
+    one = planar_flights(OTHER_PLANAR, FlightSpec(flights=1, steps=1500, seed=5))
+    noisy = add_noise(one, 1e-6)
+    model, report = select_model(noisy, planar_library(), **FAST)
+    assert report.folds == 5
+    check = check_support(model, truth_planar(OTHER_PLANAR))
+    assert check.exact_support, (check.missed, check.spurious)
+    assert check.max_rel_error < 1e-2
+
+
+# -- refusal ----------------------------------------------------------------------------
+def test_three_rows_are_refused():
+    tr = Trajectory([0, 0.01, 0.02], np.ones((3, 6)) * [[0], [1], [2]], np.ones((3, 2)), PS, PI)
+    with pytest.raises(ValueError, match="regression rows for a library of 24 terms"):
+        fit([tr], planar_library(), FitConfig())
+    with pytest.raises(ValueError, match="more samples"):
+        select_model([tr], planar_library())
+
+
+def test_constant_input_is_refused(other_clean):
+    tr = other_clean[0]
+    hover = Trajectory(tr.t, tr.x, np.tile([4.9, 0.001], (len(tr), 1)), PS, PI)
+    with pytest.raises(ValueError, match="input 'u1' is constant"):
+        select_model([hover], planar_library())
+
+
+def test_collinear_columns_are_refused_naming_them(other_clean):
+    tr = other_clean[0]
+    x = tr.x.copy()
+    x[:, 1] = 2.0 * x[:, 0] + 1.0  # z = 2 y + 1: '1', 'y', 'z' are collinear
+    lib = library_from_spec("degree=1", PS, PI)
+    with pytest.raises(ValueError, match=r"terms \[.*'z'.*\] are exactly collinear"):
+        fit([Trajectory(tr.t, x, tr.u, PS, PI)], lib, FitConfig())
+
+
+def test_cli_errors_are_one_line_and_nonzero(tmp_path):
+    path = tmp_path / "short.csv"
+    path.write_text("t,y,z,phi,y_dot,z_dot,phi_dot,u1,u2\n" + "\n".join(
+        f"{k * 0.01},{k},{k},0,0,0,0,1,0" for k in range(30)
+    ))  # fmt: skip
+    result = CliRunner().invoke(app, ["identify", str(path), "--out", str(tmp_path / "m.json")])
+    assert result.exit_code == 2
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:"), result.output
+
+
+def test_cli_identify_any_names_and_show(tmp_path, other_clean):
+    """A log with its own names (no preset): states/inputs from the header, a spec library."""
+    paths = []
+    for i, tr in enumerate(other_clean):
+        renamed = Trajectory(tr.t, tr.x, tr.u, ("a", "b", "roll", "a_dot", "b_dot", "roll_dot"),
+                             ("thrust", "moment"))  # fmt: skip
+        paths.append(str(write_trajectory_csv(tmp_path / f"f{i}.csv", renamed)))
+    out = tmp_path / "m.json"
+    args = ["identify", *paths, "--out", str(out), "--inputs", "thrust,moment",
+            "--library", "degree=1;angles=roll", "--window", "1"]  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    model = load_model(out)
+    assert model.system is None and model.input_names == ("thrust", "moment")
+    assert model.n_terms == 7
+    raw = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"non-JSON {c}"))
+    assert raw["inclusion_probability"] is not None and (tmp_path / "m.png").stat().st_size > 0
+    shown = CliRunner().invoke(app, ["show", str(out)])
+    assert shown.exit_code == 0 and "P=1.00" in shown.output and "selected:" in shown.output
+    latex = CliRunner().invoke(app, ["show", str(out), "--latex"])
+    assert "\\pm" in latex.output
+
+
+# -- real logs --------------------------------------------------------------------------
+def test_clean_drops_stale_rows_and_outliers_and_splits_at_gaps(other_clean):
+    tr = other_clean[0]
+    t, x = tr.t.copy(), tr.x.copy()
+    x[100] = x[99]  # the logger re-sent a sample
+    x[300, 2] += 0.5  # a glitch in phi
+    t[450:] += 0.2  # a 0.2 s gap
+    segs, report = clean(t, x, tr.u, PS, PI)
+    assert (report.stale_rows, report.outlier_rows, report.gaps) == (1, 1, 1)
+    assert report.segments == len(segs) == 4 and report.rows_out == len(tr) - 2
+    assert all(np.all(np.diff(s.t) < 0.02) for s in segs)
