@@ -429,14 +429,17 @@ def read_flight(
     return flight_to_trajectory(table, columns, repair_stale, source=str(path))
 
 
-def read_log(path: str | Path, mapping: Mapping[str, Any], repair_stale: bool = True) -> Trajectory:
+def read_vehicle_log(
+    path: str | Path, mapping: Mapping[str, Any], repair_stale: bool = True
+) -> Trajectory:
     """Generic reader: a column mapping (fields of :class:`LogColumns`) over the defaults.
 
     Example for a CSV with body-frame velocity, Euler angles and motor speeds in RPM::
 
-        read_log("flight.csv", {"time": "time", "velocity": "u,v,w", "velocity_frame": "body",
-                                "euler_zxy": "roll,pitch,yaw", "motors": "rpm1,rpm2,rpm3,rpm4",
-                                "motor_unit": "rpm"})
+        read_vehicle_log("flight.csv", {
+            "time": "time", "velocity": "u,v,w", "velocity_frame": "body",
+            "euler_zxy": "roll,pitch,yaw", "motors": "rpm1,rpm2,rpm3,rpm4", "motor_unit": "rpm",
+        })
     """
     return read_flight(path, LogColumns.from_mapping(mapping), repair_stale)
 

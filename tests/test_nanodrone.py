@@ -18,8 +18,8 @@ from identification.logs import (
     geodesic_angle,
     quaternion_to_rotation,
     read_flight,
-    read_log,
     read_table,
+    read_vehicle_log,
     rotation_to_euler_zxy,
     rotation_to_quaternion,
     trajectory_to_table,
@@ -149,7 +149,7 @@ def test_generic_reader_csv_with_mapping(tmp_path):
     mapping = {"time": "time", "position": ["px", "py", "pz"], "velocity": "u,v,w"}
     mapping |= {"velocity_frame": "body", "euler_zxy": "roll,pitch,yaw", "rates": "p,q,r"}
     mapping |= {"motors": "rpm1,rpm2,rpm3,rpm4", "motor_unit": "rpm"}
-    traj = read_log(path, mapping)
+    traj = read_vehicle_log(path, mapping)
     np.testing.assert_allclose(traj.x, truth.x, atol=1e-9)
     np.testing.assert_allclose(traj.u, truth.u, rtol=1e-9)
 

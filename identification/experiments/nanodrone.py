@@ -501,8 +501,13 @@ def report_markdown(metrics: dict[str, Any], model: RotorcraftModel) -> str:
         + ", ".join(metrics["selection_files"])
         + " only.",
         "",
-        "Published rows are the paper's numbers on its own test flight `melon` (not available "
-        "here); ours are on the test flights above, all models on the same repaired logs.",
+        "Published rows are the paper's numbers on its test flight `melon`"
+        + (
+            "; ours are on the same flight(s)"
+            if any(flight_family(p)[0] == "melon" for p in metrics["test_files"])
+            else " (not among the test flights here, so compare with care)"
+        )
+        + ". All our rows are scored on the same repaired logs.",
         "",
         "| model | h = 50 MAE: position / velocity / attitude / rates | SimErr |",
         "|---|---|---|",
