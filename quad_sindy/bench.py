@@ -62,37 +62,53 @@ def _hover_action(env: object, single: bool = False) -> np.ndarray:
 
 
 def bench_envs(
-    env_ids: tuple[str, ...], num_envs: int = 1024, min_seconds: float = 2.0
+    env_ids: tuple[str, ...],
+    num_envs: int = 1024,
+    min_seconds: float = 2.0,
+    effects: tuple[object, ...] = (None, "all"),
 ) -> list[dict]:
-    """Measures Pendulum-v1 and each env id single and vectorised, in one run."""
+    """Measures Pendulum-v1 and each env id single and vectorised, in one run.
+
+    Args:
+        env_ids: Env ids to measure.
+        num_envs: Vector env size.
+        min_seconds: Minimum timing per measurement.
+        effects: Effect settings to measure each env with (``None``: the paper vehicle;
+            ``"all"``: every effect on, observation noise and 10 % parameter randomisation).
+
+    Returns:
+        Rows ``env, mode, effects, steps_per_s, ratio`` (ratio to Pendulum-v1's single rate).
+    """
     pendulum = single_env_rate("Pendulum-v1", min_seconds)
-    rows = [{"env": "Pendulum-v1", "mode": "single", "steps_per_s": pendulum, "ratio": 1.0}]
+    rows = [{"env": "Pendulum-v1", "mode": "single", "effects": "-", "steps_per_s": pendulum}]
     for env_id in env_ids:
-        single = single_env_rate(env_id, min_seconds)
-        vec = vector_env_rate(env_id, num_envs, min_seconds)
-        rows.append(
-            {"env": env_id, "mode": "single", "steps_per_s": single, "ratio": single / pendulum}
-        )
-        rows.append(
-            {
-                "env": env_id,
-                "mode": f"vector x{num_envs}",
-                "steps_per_s": vec,
-                "ratio": vec / pendulum,
-            }
-        )
+        for spec in effects:
+            kwargs: dict = {}
+            if spec is not None:
+                kwargs = {"effects": spec, "obs_noise_std": 0.01, "param_randomization": 0.1}
+            label = "none" if spec is None else str(spec)
+            single = single_env_rate(env_id, min_seconds, **kwargs)
+            vec = vector_env_rate(env_id, num_envs, min_seconds, **kwargs)
+            rows.append({"env": env_id, "mode": "single", "effects": label, "steps_per_s": single})
+            rows.append(
+                {"env": env_id, "mode": f"vector x{num_envs}", "effects": label, "steps_per_s": vec}
+            )
+    for row in rows:
+        row["ratio"] = row["steps_per_s"] / pendulum
     return rows
 
 
 def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
-    """Steps/s of the ground truth, the compiled surrogate and a pysindy-``predict`` surrogate.
+    """Steps/s of the ground truth and of surrogates of it, in one run.
 
-    The models are the exact planar model (what ``reproduce`` identifies) in our library; the
-    ``predict`` surrogate is the same base env stepping a fitted ``ps.SINDy`` through
-    ``model.predict`` once per RK4 stage.
+    The model is the exact planar model (what ``reproduce`` identifies) in our library:
+    ``PlanarQuadSINDy-v0`` as registered (its numpy ``rhs`` integrated by ``rk4_step``), the
+    same model compiled by numba into the env's kernel (:mod:`identification.compiled`), and
+    a pysindy-``predict`` surrogate (a fitted ``ps.SINDy`` called once per RK4 stage).
     """
     import pysindy as ps
 
+    from identification.compiled import compiled_rhs
     from identification.data import Trajectory
     from identification.experiments.truth import model_from_truth
     from identification.libraries import paper_planar_library
@@ -105,18 +121,24 @@ def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
     sindy.fit(data.x, t=data.dt, u=data.u, feature_names=[*data.state_names, *data.input_names])
 
     def predict_rhs(x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        return np.asarray(sindy.predict(x[None, :], u=u[None, :]))[0]
+        return np.asarray(sindy.predict(np.atleast_2d(x), u=np.atleast_2d(u))).reshape(x.shape)
 
     truth = single_env_rate("PlanarQuad-v0", min_seconds)
-    compiled = single_env_rate("PlanarQuadSINDy-v0", min_seconds, model=model)
+    registered = single_env_rate("PlanarQuadSINDy-v0", min_seconds, model=model)
+    compiled = single_env_rate("PlanarQuad-v0", min_seconds, rhs=compiled_rhs(model))
     slow = single_env_rate("PlanarQuad-v0", min_seconds / 4, rhs=predict_rhs)
     return [
         {"env": "PlanarQuad-v0 (ground truth)", "steps_per_s": truth, "ratio": 1.0},
         {
-            "env": "PlanarQuadSINDy-v0 (compiled rhs)",
+            "env": "PlanarQuadSINDy-v0 (numpy rhs)",
+            "steps_per_s": registered,
+            "ratio": registered / truth,
+        },
+        {
+            "env": "surrogate, numba-compiled rhs",
             "steps_per_s": compiled,
             "ratio": compiled / truth,
         },
         {"env": "surrogate via pysindy predict", "steps_per_s": slow, "ratio": slow / truth},
-        {"env": "compiled / predict", "steps_per_s": float("nan"), "ratio": compiled / slow},
+        {"env": "numba-compiled / predict", "steps_per_s": float("nan"), "ratio": compiled / slow},
     ]

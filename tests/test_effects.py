@@ -324,3 +324,38 @@ def test_env_pickles_after_render(env_id):
     o2, *_ = clone.step(action)
     np.testing.assert_array_equal(o1, o2)
     assert clone.render().shape == frame.shape
+
+
+@pytest.mark.parametrize("system", ["planar", "quad6dof"])
+def test_compiled_surrogate_point_equals_the_model_rhs(system):
+    from identification.compiled import compiled_rhs
+    from identification.experiments.truth import model_from_truth
+
+    model = model_from_truth(system)
+    rhs = compiled_rhs(model)
+    rng = np.random.default_rng(0)
+    n, m = len(model.state_names), len(model.input_names)
+    for _ in range(5):
+        x, u = rng.normal(size=n) * 0.5, rng.normal(size=m)
+        out = np.empty(n)
+        rhs.point(x, u, out)
+        np.testing.assert_allclose(out, model.rhs(x, u), rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(rhs(x, u), model.rhs(x, u))
+
+
+@pytest.mark.slow
+def test_compiled_surrogate_env_follows_the_truth():
+    from identification.compiled import compiled_rhs
+    from identification.experiments.truth import model_from_truth
+
+    truth = gym.make("PlanarQuad-v0", trajectory="figure8")
+    surrogate = gym.make(
+        "PlanarQuad-v0", trajectory="figure8", rhs=compiled_rhs(model_from_truth("planar"))
+    )
+    truth.reset(seed=0)
+    surrogate.reset(seed=0)
+    for _ in range(300):
+        action = np.array([1.8, 0.0005])
+        *_, info = truth.step(action)
+        *_, sinfo = surrogate.step(action)
+    np.testing.assert_allclose(sinfo["state"], info["state"], atol=1e-9)
