@@ -381,3 +381,20 @@ def test_benchmark_command_rejects_bad_data(tmp_path):
     result = CliRunner().invoke(app, ["benchmark", "nanodrone", "--data", str(tmp_path / "none")])
     assert result.exit_code == 2
     assert "no such data folder" in result.output
+
+
+@pytest.mark.slow
+@needs_flights
+def test_full_benchmark_reaches_the_figures(tmp_path):
+    """The whole command on the shared flights (about 4 minutes): the issue's figures."""
+    from identification.experiments.nanodrone import beats_published, run_benchmark
+
+    metrics = run_benchmark(FLIGHTS, None, tmp_path, figures=False, progress=False)
+    beats = beats_published(metrics)
+    assert all(beats["h50"].values()) and all(beats["simerr"].values())
+    ours, hold = metrics["models"]["sindy"], metrics["models"]["hold"]
+    for h in ("1", "10"):
+        for group, value in ours["mae"][h].items():
+            assert value <= hold["mae"][h][group]
+    assert ours["n_terms"] <= 60
+    assert metrics["thrust_coefficient"] == pytest.approx(8.27e-7, rel=0.05)

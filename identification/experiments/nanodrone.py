@@ -514,6 +514,19 @@ def report_markdown(metrics: dict[str, Any], model: RotorcraftModel) -> str:
     ]
     for label, h50, sim in comparison_rows(metrics):
         lines.append(f"| {label} | {fmt(h50, 3)} | {fmt(sim, 2)} |")
+    hold_ours = [metrics["models"]["hold"]["mae"]["50"][g] for g in GROUPS]
+    hold_pub = PUBLISHED["hold the state"]["h50"]
+    lines += [
+        "",
+        "The same h = 50 MAE divided by holding the state on the same flights (a rough way to "
+        "compare across different test flights; lower is better):",
+        "",
+        "| model | position / velocity / attitude / rates |",
+        "|---|---|",
+    ]
+    for label, h50, _ in comparison_rows(metrics):
+        ref = hold_pub if "published" in label else hold_ours
+        lines.append(f"| {label} | {fmt([a / b for a, b in zip(h50, ref, strict=True)], 2)} |")
     lines += ["", "Short horizons (MAE, position / velocity / attitude / rates):", ""]
     lines += ["| model | h = 1 | h = 10 | h = 25 |", "|---|---|---|---|"]
     for key in ("sindy", "physics", "hold"):
