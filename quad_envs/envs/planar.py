@@ -31,12 +31,21 @@ class PlanarQuadEnv(QuadrotorEnv):
     With ``normalize_actions=True`` both lie in [-1, 1] (0 is hover). Reward, termination and
     the other arguments: see :class:`quad_envs.envs.base.QuadrotorEnv` and
     :mod:`quad_envs.tasks`.
+
+    ## Vehicles, action modes, effects
+    ``vehicle="paper"`` (default), ``"crazyflie"`` or ``"pelican"``
+    (:data:`quad_envs.params.PRESETS`). ``action_mode="collective"`` (the table above),
+    ``"rotor_thrusts"`` (2 thrusts [N] in [rotor_force_min, rotor_force_max]) or
+    ``"motor_speeds"`` (2 speeds [rad/s]; vehicles with a thrust coefficient).
+    ``effects=`` switches on rotor dynamics (the 2 rotor thrusts [N] are appended to the
+    observation), drag, wind and gusts, observation bias and delay, per-rotor limits
+    (:class:`quad_envs.physics.Effects`; ``effects="all"`` for all of them).
     """
 
     vehicle = PLANAR
 
 
 class PlanarQuadVectorEnv(QuadrotorVectorEnv):
-    """Native vector version of :class:`PlanarQuadEnv` (batched numpy, same physics)."""
+    """Native vector version of :class:`PlanarQuadEnv` (the same compiled kernel, batched)."""
 
     vehicle = PLANAR

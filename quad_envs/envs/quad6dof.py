@@ -31,12 +31,21 @@ class Quad6DOFEnv(QuadrotorEnv):
     The per-rotor limits [0, m g / 2] apply inside the dynamics. ``normalize_actions=True``
     maps [-1, 1] onto the box (0 is hover). Other arguments: see
     :class:`quad_envs.envs.base.QuadrotorEnv`.
+
+    ## Vehicles, action modes, effects
+    ``vehicle="paper"`` (default), ``"crazyflie"`` or ``"pelican"``
+    (:data:`quad_envs.params.PRESETS`). ``action_mode="collective"`` (the table above),
+    ``"rotor_thrusts"`` (4 thrusts [N] in [rotor_force_min, rotor_force_max]) or
+    ``"motor_speeds"`` (4 speeds [rad/s]; vehicles with a thrust coefficient).
+    ``effects=`` switches on rotor dynamics (the 4 rotor thrusts [N] are appended to the
+    observation), drag, wind and gusts, observation bias and delay, per-rotor limits
+    (:class:`quad_envs.physics.Effects`; ``effects="all"`` for all of them).
     """
 
     vehicle = QUAD6DOF
 
 
 class Quad6DOFVectorEnv(QuadrotorVectorEnv):
-    """Native vector version of :class:`Quad6DOFEnv` (batched numpy, same physics)."""
+    """Native vector version of :class:`Quad6DOFEnv` (the same compiled kernel, batched)."""
 
     vehicle = QUAD6DOF
