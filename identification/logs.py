@@ -62,6 +62,8 @@ class LogColumns:
         motor_unit: ``rad/s``, ``rpm`` or ``erpm`` (electrical RPM, needs ``pole_pairs``).
         pole_pairs: Motor pole pairs (eRPM = pole_pairs x mechanical RPM).
         omega_max: Largest credible motor speed [rad/s]; faster readings are spikes.
+        quaternion_offset: Estimate and remove a constant quaternion offset (unit quaternions
+            give c = 0); False: only normalise.
     """
 
     time: str = "t"
@@ -75,6 +77,7 @@ class LogColumns:
     motor_unit: str = "erpm"
     pole_pairs: int = 6
     omega_max: float = 5000.0
+    quaternion_offset: bool = True
 
     def __post_init__(self) -> None:
         if self.motor_unit not in MOTOR_UNITS:
@@ -106,8 +109,16 @@ class LogColumns:
             raise ValueError(f"unknown column mapping key(s) {unknown}; valid: {sorted(known)}")
         values: dict[str, Any] = {}
         for key, value in mapping.items():
+            current = getattr(base, key)
             if isinstance(value, str) and key in _SEQUENCE_FIELDS:
                 value = tuple(v.strip() for v in value.split(","))
+            elif isinstance(value, str) and isinstance(current, bool):
+                value = value.strip().lower() in ("1", "true", "yes", "on")
+            elif isinstance(value, str) and isinstance(current, int | float):
+                try:
+                    value = type(current)(value)
+                except ValueError:
+                    raise ValueError(f"column mapping {key}={value!r} is not a number") from None
             elif isinstance(value, list):
                 value = tuple(value)
             values[key] = value
@@ -387,7 +398,7 @@ def flight_to_trajectory(
         fresh = ~(stale | nan.any(axis=1))
         norms = np.linalg.norm(att[fresh], axis=1)
         report.quaternion_norm_range = [float(norms.min()), float(norms.max())]
-        c = estimate_quaternion_offset(att[fresh])
+        c = estimate_quaternion_offset(att[fresh]) if columns.quaternion_offset else np.zeros(4)
         report.quaternion_offset = [float(v) for v in c]
         report.quaternion_norm_error = float(
             np.abs(np.linalg.norm(att[fresh] - c, axis=1) - 1.0).max()

@@ -75,6 +75,9 @@ def test_quaternion_offset_recovered():
     quat = rotation_to_quaternion(rotation_zxy(*rng.uniform(-1, 1, (3, 300))))
     offset = np.array([-0.002, 0.001, -0.003, 0.045])
     np.testing.assert_allclose(estimate_quaternion_offset(quat - offset), -offset, atol=1e-9)
+    # Unit quaternions of a near-constant attitude (hover): no offset is invented.
+    hover = rotation_to_quaternion(rotation_zxy(*(0.05 + 1e-3 * rng.normal(size=(3, 300)))))
+    np.testing.assert_allclose(estimate_quaternion_offset(hover), 0.0, atol=1e-12)
 
 
 # -- synthetic logs: the conversion run backwards ---------------------------------------
@@ -157,6 +160,10 @@ def test_generic_reader_csv_with_mapping(tmp_path):
 def test_bad_inputs_raise_one_line_errors(tmp_path):
     with pytest.raises(ValueError, match="unknown column mapping key"):
         LogColumns.from_mapping({"motor": "a"})
+    cols = LogColumns.from_mapping({"pole_pairs": "7", "quaternion_offset": "false"})
+    assert cols.pole_pairs == 7 and cols.quaternion_offset is False
+    with pytest.raises(ValueError, match="omega_max='fast' is not a number"):
+        LogColumns.from_mapping({"omega_max": "fast"})
     with pytest.raises(ValueError, match="motor_unit"):
         LogColumns(motor_unit="hz")
     with pytest.raises(ValueError, match="exactly one attitude"):
