@@ -124,25 +124,40 @@ class NominalRotorcraft:
 NANODRONE_NOMINAL = NominalRotorcraft()
 
 
-# -- batched kinematics (torch) ---------------------------------------------------------
+# -- batched kinematics (numpy arrays or torch tensors) -----------------------------------
+def _xp(arr: Any) -> Any:
+    """The array module of ``arr``: torch for tensors, else numpy (same names used below)."""
+    return torch if isinstance(arr, torch.Tensor) else np
+
+
+def _cat(arrays: Sequence[Any]) -> Any:
+    return (
+        torch.cat(arrays, -1) if isinstance(arrays[0], torch.Tensor) else np.concatenate(arrays, -1)
+    )
+
+
 def rotation_zxy_torch(phi: torch.Tensor, theta: torch.Tensor, psi: torch.Tensor) -> torch.Tensor:
-    """:func:`quad_envs.dynamics.rotation_zxy` for tensors: shape S + (3, 3)."""
-    cf, sf, ct, st = torch.cos(phi), torch.sin(phi), torch.cos(theta), torch.sin(theta)
-    cp, sp = torch.cos(psi), torch.sin(psi)
+    """:func:`quad_envs.dynamics.rotation_zxy` for tensors (or arrays): shape S + (3, 3)."""
+    xp = _xp(phi)
+    cf, sf, ct, st = xp.cos(phi), xp.sin(phi), xp.cos(theta), xp.sin(theta)
+    cp, sp = xp.cos(psi), xp.sin(psi)
     rows = (
         (cp * ct - sf * sp * st, -cf * sp, cp * st + ct * sf * sp),
         (ct * sp + cp * sf * st, cf * cp, sp * st - cp * ct * sf),
         (-cf * st, sf, cf * ct),
     )
-    return torch.stack([torch.stack(row, -1) for row in rows], -2)
+    return xp.stack([xp.stack(row, -1) for row in rows], -2)
 
 
 def library(x: torch.Tensor, a: torch.Tensor, a_dot: torch.Tensor) -> torch.Tensor:
     """The terms of :data:`FEATURES` at states (..., 12), actuator speeds and their rates (..., 4).
 
+    Works on torch tensors (differentiable) and numpy arrays alike.
+
     Returns:
-        Tensor (..., len(FEATURES)), columns in :data:`FEATURE_NAMES` order.
+        Array (..., len(FEATURES)), columns in :data:`FEATURE_NAMES` order.
     """
+    xp = _xp(x)
     phi, theta = x[..., 3], x[..., 4]
     u, v, w, p, q, r = (x[..., i] for i in range(6, 12))
     sq = a * a
@@ -151,12 +166,12 @@ def library(x: torch.Tensor, a: torch.Tensor, a_dot: torch.Tensor) -> torch.Tens
     speed_sum = a1 + a2 + a3 + a4
     momentum = a2 + a4 - a1 - a3
     momentum_dot = a_dot[..., 1] + a_dot[..., 3] - a_dot[..., 0] - a_dot[..., 2]
-    cf = torch.cos(phi)
+    cf = xp.cos(phi)
     cols = (
-        torch.ones_like(phi),
-        -cf * torch.sin(theta),
-        torch.sin(phi),
-        cf * torch.cos(theta),
+        xp.ones_like(phi),
+        -cf * xp.sin(theta),
+        xp.sin(phi),
+        cf * xp.cos(theta),
         s1 + s2 + s3 + s4,
         s3 + s4 - s1 - s2,
         s2 + s3 - s1 - s4,
@@ -167,20 +182,21 @@ def library(x: torch.Tensor, a: torch.Tensor, a_dot: torch.Tensor) -> torch.Tens
         momentum * p, momentum * q,
         momentum_dot,
     )  # fmt: skip
-    return torch.stack(cols, -1)
+    return xp.stack(cols, -1)
 
 
 def kinematics(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The exact parts: position rate R v_B, Euler angle rates T^-1 omega, and -omega x v_B."""
     phi, theta, psi = x[..., 3], x[..., 4], x[..., 5]
     u, v, w, p, q, r = (x[..., i] for i in range(6, 12))
+    xp = _xp(x)
     rot = rotation_zxy_torch(phi, theta, psi)
     pos_dot = (rot @ x[..., 6:9, None])[..., 0]
-    cf, sf, ct, st = torch.cos(phi), torch.sin(phi), torch.cos(theta), torch.sin(theta)
-    angle_dot = torch.stack(
+    cf, sf, ct, st = xp.cos(phi), xp.sin(phi), xp.cos(theta), xp.sin(theta)
+    angle_dot = xp.stack(
         (ct * p + st * r, q + (sf / cf) * (st * p - ct * r), (-st * p + ct * r) / cf), -1
     )
-    coriolis = torch.stack((r * v - q * w, p * w - r * u, q * u - p * v), -1)
+    coriolis = xp.stack((r * v - q * w, p * w - r * u, q * u - p * v), -1)
     return pos_dot, angle_dot, coriolis
 
 
@@ -262,21 +278,39 @@ class RotorcraftModel:
     def rhs_torch(self, coefficients: torch.Tensor | None = None) -> Callable:
         """f(z, omega) on tensors: z = [state(12), actuator(4)], omega the held speeds (..., 4)."""
         xi = torch.as_tensor(self.coefficients) if coefficients is None else coefficients
+        return self._field(xi)
+
+    def _field(self, xi: Any) -> Callable:
         tau = self.tau
 
-        def rhs(z: torch.Tensor, omega: torch.Tensor) -> torch.Tensor:
+        def rhs(z: Any, omega: Any) -> Any:
             x, a = z[..., :12], z[..., 12:]
             if tau > 0:
                 a_dot = (omega - a) / tau
             else:
-                a, a_dot = omega, torch.zeros_like(omega)
+                a, a_dot = omega, 0.0 * omega
             theta = library(x, a, a_dot)
-            accel = theta @ xi.to(theta.dtype).T
+            coef = xi.to(theta.dtype) if isinstance(theta, torch.Tensor) else xi
+            accel = theta @ coef.T
             pos_dot, angle_dot, coriolis = kinematics(x)
             body = accel[..., 0:3] + coriolis
-            return torch.cat((pos_dot, angle_dot, body, accel[..., 3:6], a_dot), -1)
+            return _cat((pos_dot, angle_dot, body, accel[..., 3:6], a_dot))
 
         return rhs
+
+    def rhs(self, z: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        """dz/dt in numpy for z = [state(12), actuator(4)] (..., 16) and held speeds (..., 4).
+
+        With ``tau = 0`` the actuator part of z is ignored (and its rate is zero). This is the
+        vector field an environment or :func:`quad_envs.integrators.rk4_step` can step.
+        """
+        z = np.asarray(z, dtype=np.float64)
+        omega = np.asarray(omega, dtype=np.float64)
+        if z.shape[-1] != 16 or omega.shape[-1] != 4:
+            raise ValueError(
+                f"z must be (..., 16) and omega (..., 4), got {z.shape}, {omega.shape}"
+            )
+        return self._field(self.coefficients)(z, omega)
 
     def rollout(
         self,

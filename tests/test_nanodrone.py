@@ -254,6 +254,27 @@ def test_nominal_model_equals_the_toolkit_rigid_body():
     np.testing.assert_allclose(ours[:, :12], quad6dof_rhs(x, u, params), rtol=1e-10, atol=1e-9)
 
 
+def test_numpy_rhs_matches_the_torch_rollout():
+    import torch
+
+    from identification.rotorcraft import FEATURE_NAMES, RotorcraftModel, nominal_model
+    from quad_envs.integrators import rk4_step
+
+    rng = np.random.default_rng(5)
+    xi = nominal_model().coefficients + 1e-3 * rng.normal(size=(6, len(FEATURE_NAMES)))
+    xi[:, FEATURE_NAMES.index("W")] *= 1e-4  # keep the perturbation small where terms are big
+    model = RotorcraftModel(xi, tau=0.04)
+    z = np.hstack([rng.normal(size=(20, 12)) * 0.3, rng.uniform(1500, 2000, (20, 4))])
+    omega = rng.uniform(1500, 2000, (20, 4))
+    torch_rhs = model.rhs_torch()(torch.as_tensor(z), torch.as_tensor(omega)).numpy()
+    np.testing.assert_allclose(model.rhs(z, omega), torch_rhs, rtol=1e-12, atol=1e-9)
+    stepped = rk4_step(model.rhs, z, omega, 0.01)
+    rolled = model.rollout(z[:, :12], z[:, 12:], omega[:, None, :])[:, 0].numpy()
+    np.testing.assert_allclose(stepped[:, :12], rolled, rtol=1e-12, atol=1e-9)
+    with pytest.raises(ValueError, match="z must be"):
+        model.rhs(z[:, :12], omega)
+
+
 def test_identification_recovers_a_known_model_from_synthetic_flights():
     from identification.experiments.nanodrone import loss_scales
     from identification.rotorcraft import (
