@@ -3,7 +3,7 @@
 One seed of the SINDy loop:
 
 1. Collect a little real data with smooth random (Ornstein-Uhlenbeck) exploration.
-2. Identify a SINDy model from all real data so far (the identifier sees data only), or an
+2. Identify a SINDy model from all real data so far with the data-alone selection, or an
    ensemble of bagged models (E-SINDy): the policy then trains on the median model or on a
    member drawn per episode, and imagined episodes end where the members disagree.
 3. Train the policy (PPO or SAC, continued across iterations) in the surrogate env.
@@ -39,6 +39,7 @@ from identification.fit import FitConfig, fit
 from identification.libraries import default_library
 from identification.model import IdentifiedModel
 from identification.rollouts import collect_rollouts
+from identification.selection import select_model
 from identification.surrogate import ENSEMBLE_MODES, make_ensemble_surrogate
 from quad_envs.fileio import write_json
 
@@ -64,7 +65,6 @@ class MBRLConfig:
         ensemble_mode: ``median`` or ``sample`` (a member per imagined episode).
         disagreement: Truncate imagined episodes whose one-step member spread (in units of
             each state's standard deviation in the data) exceeds this (None: never).
-        lam: Sparsity threshold of the identification.
         env_options: Options of the ground truth only (vehicle parameters, effects): the
             surrogate gets the task options, never the truth's physics.
     """
@@ -82,7 +82,6 @@ class MBRLConfig:
     ensemble: int = 1
     ensemble_mode: str = "median"
     disagreement: float | None = 0.1
-    lam: float = 1e-3
     env_options: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -132,26 +131,24 @@ def identify(
 ) -> list[IdentifiedModel]:
     """The model (or the bagged ensemble) identified from the real data so far.
 
-    Bagging (E-SINDy) resamples 100-step segments of the data with replacement, so every
-    member sees whole transitions of the same flights; member 0 is fitted on all the data.
+    The sparsity and the integral window are chosen from the data alone
+    (:func:`identification.selection.select_model`: cross-validated multi-step prediction);
+    with ``config.ensemble > 1`` that configuration is refitted on bootstrap resamples of
+    100-step segments (E-SINDy bagging), member 0 being the selected model itself.
     """
-    fit_config = FitConfig(lam=config.lam)
-    models = [fit(data, library, fit_config)]
-    segments = [
-        Trajectory(
-            t.t[i : i + 101], t.x[i : i + 101], t.u[i : i + 101], t.state_names, t.input_names
-        )  # fmt: skip
-        for t in data
-        for i in range(0, len(t) - 3, 100)
-        if len(t) - i >= 4
-    ]
+    model, _ = select_model(data, library, n_models=0, seed=seed)
+    models = [model]
+    if config.ensemble == 1:
+        return models
+    chosen = FitConfig(optimizer="stlsq", lam=model.meta["lambda"], window=model.meta["window"])
+    segments = [t.slice(i, min(i + 101, len(t))) for t in data for i in range(0, len(t) - 20, 100)]
     rng = np.random.default_rng(seed)
     for _ in range(10 * config.ensemble):
         if len(models) == config.ensemble:
             break
         picks = rng.integers(len(segments), size=len(segments))
         try:
-            models.append(fit([segments[i] for i in picks], library, fit_config))
+            models.append(fit([segments[i] for i in picks], model.feature_names, chosen))
         except (ValueError, np.linalg.LinAlgError):
             continue  # a resample that cannot determine the model is drawn again
     return models

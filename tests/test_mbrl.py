@@ -102,3 +102,19 @@ def test_ensemble_median_and_disagreement_truncation():
     with pytest.raises(ValueError, match="mode"):
         make_ensemble_surrogate([exact], "PlanarQuad-v0", mode="mean")
     assert isinstance(gym.wrappers.TimeLimit(agree, 10), gym.Wrapper)
+
+
+def test_identify_bags_an_ensemble_around_the_selected_model():
+    from agents.mbrl import _collect, identify
+    from agents.policies import OrnsteinUhlenbeckPolicy
+    from identification.libraries import default_library
+
+    config = dataclasses.replace(TINY, ensemble=3)
+    env = gym.make(config.env_id, **config.truth_kwargs)
+    data = _collect(config, OrnsteinUhlenbeckPolicy(env, 0), 600, 0)
+    models = identify(data, default_library("planar"), config, seed=0)
+    assert len(models) == 3
+    assert {tuple(m.feature_names) for m in models} == {tuple(models[0].feature_names)}
+    assert "selection" in models[0].meta  # member 0 is the data-alone selection
+    truth = model_from_truth("planar", models[0].feature_names)
+    np.testing.assert_allclose(models[0].coefficients, truth.coefficients, rtol=1e-6, atol=1e-6)
