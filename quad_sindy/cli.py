@@ -493,11 +493,17 @@ def benchmark_nanodrone(
 
     try:
         metrics = run_benchmark(data, test, out, progress=not quiet)
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, OSError, FloatingPointError) as exc:
         _fail(str(exc))
+    typer.echo(f"test: {metrics['split']}, {metrics['windows']} windows")
+    typer.echo("model    h=50 MAE position / velocity / attitude / rates   SimErr")
     for name, entry in metrics["models"].items():
         h50 = " / ".join(f"{v:.3f}" for v in entry["mae"]["50"].values())
         sim = " / ".join(f"{v:.2f}" for v in entry["simerr"].values())
-        typer.echo(f"{name:<8} h=50 {h50}   SimErr {sim}")
-    typer.echo(f"beats every published model: {beats_published(metrics)}")
+        typer.echo(f"{name:<8} {h50:<42} {sim}")
+    for key, label in (("h50", "at h=50"), ("simerr", "in SimErr")):
+        verdict = ", ".join(
+            f"{g} {'yes' if ok else 'NO'}" for g, ok in beats_published(metrics)[key].items()
+        )
+        typer.echo(f"beats every published model {label}: {verdict}")
     typer.echo(f"wrote {out}/report.md, metrics.json, model.json and figures")
