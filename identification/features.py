@@ -3,9 +3,14 @@
 A feature is a product of factors separated by spaces, e.g. ``u1 sin(phi)`` or pysindy's own
 ``u1 sin(1 phi)``. A factor is one of
 
-    1 | v | v^k | sin(v) | cos(v) | tan(v) | sec(v) | sin(k v) | cos(k v)
+    1 | v | v^k | sin(v) | cos(v) | tan(v) | sec(v) | sin(k v) | cos(k v) | abs(v)
+      | norm(v w ...)
 
-where ``v`` names a state or an input. Parsing gives a canonical form (sorted factors), so
+where ``v`` names a state or an input. ``abs(v)`` is |v| and ``norm(v w ...)`` the Euclidean
+norm sqrt(v^2 + w^2 + ...) of the listed variables (space-separated, canonically sorted; a
+norm of one variable is ``abs``): ``y_dot norm(y_dot z_dot)`` is a quadratic-drag term.
+
+Parsing gives a canonical form (sorted factors), so
 ``sin(1 phi) u1`` and ``u1 sin(phi)`` are the same feature. Compiling turns a list of names
 (and optionally a coefficient matrix) into generated numpy or torch code: a model's ``rhs``
 costs microseconds, not pysindy's ``predict`` milliseconds.
@@ -25,25 +30,40 @@ from quad_envs.dynamics import _unpack
 _TOKEN = re.compile(r"[A-Za-z_]\w*\([^)]*\)|\S+")
 _FUNC = re.compile(r"^(sin|cos|tan|sec)\((?:(\d+)\s+)?([A-Za-z_]\w*)\)$")
 _POWER = re.compile(r"^([A-Za-z_]\w*)(?:\^(\d+))?$")
+_NORM = re.compile(r"^(abs|norm)\(\s*([A-Za-z_]\w*(?:\s+[A-Za-z_]\w*)*)\s*\)$")
 
 
 @dataclass(frozen=True, order=True)
 class Factor:
-    """One factor: ``kind`` is ``pow``, ``sin``, ``cos``, ``tan`` or ``sec``."""
+    """One factor: ``kind`` is ``pow``, ``sin``, ``cos``, ``tan``, ``sec``, ``abs`` or ``norm``.
+
+    For ``norm``, ``var`` holds the sorted variable names separated by single spaces.
+    """
 
     var: str
     kind: str
-    k: int  # power for pow, frequency for trig
+    k: int  # power for pow, frequency for trig, 1 for abs and norm
+
+    def variables(self) -> tuple[str, ...]:
+        """The variables the factor reads (several for ``norm``)."""
+        return tuple(self.var.split()) if self.kind == "norm" else (self.var,)
 
     def name(self) -> str:
         """Canonical text of the factor."""
+        if self.kind in ("abs", "norm"):
+            return f"{self.kind}({self.var})"
         if self.kind == "pow":
             return self.var if self.k == 1 else f"{self.var}^{self.k}"
         return f"{self.kind}({self.var})" if self.k == 1 else f"{self.kind}({self.k} {self.var})"
 
     def latex(self) -> str:
         """LaTeX of the factor."""
+        if self.kind == "norm":
+            inner = ", ".join(_latex_var(v) for v in self.variables())
+            return f"\\left\\|({inner})\\right\\|"
         var = _latex_var(self.var)
+        if self.kind == "abs":
+            return f"\\left|{var}\\right|"
         if self.kind == "pow":
             return var if self.k == 1 else f"{var}^{{{self.k}}}"
         arg = var if self.k == 1 else f"{self.k}{var}"
@@ -88,6 +108,14 @@ def parse_term(name: str, variables: Sequence[str] | None = None) -> Term:
     for token in _TOKEN.findall(text):
         if token == "1":
             continue
+        norm = _NORM.match(token)
+        if norm:
+            names = sorted(norm.group(2).split())
+            if len(set(names)) != len(names):
+                raise ValueError(f"repeated variable in factor {token!r} of feature {name!r}")
+            kind = "abs" if len(names) == 1 else "norm"
+            trig.append(Factor(" ".join(names), kind, 1))
+            continue
         func = _FUNC.match(token)
         if func:
             kind, freq, var = func.group(1), int(func.group(2) or 1), func.group(3)
@@ -100,7 +128,7 @@ def parse_term(name: str, variables: Sequence[str] | None = None) -> Term:
         powers[var] = powers.get(var, 0) + k
     factors = [Factor(v, "pow", k) for v, k in powers.items()] + trig
     if variables is not None:
-        unknown = sorted({f.var for f in factors} - set(variables))
+        unknown = sorted({v for f in factors for v in f.variables()} - set(variables))
         if unknown:
             raise ValueError(f"feature {name!r} uses unknown variable(s) {unknown}")
     return tuple(sorted(factors))
@@ -117,7 +145,12 @@ def term_latex(term: Term) -> str:
 
 
 def _factor_expr(factor: Factor, index: dict[str, str]) -> str:
+    if factor.kind == "norm":
+        squares = " + ".join(f"{index[v]} ** 2" for v in factor.variables())
+        return f"xp.sqrt({squares})"
     var = index[factor.var]
+    if factor.kind == "abs":
+        return f"xp.abs({var})"
     arg = var if factor.k == 1 or factor.kind == "pow" else f"{factor.k} * {var}"
     if factor.kind == "pow":
         return arg if factor.k == 1 else f"{arg} ** {factor.k}"

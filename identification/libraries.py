@@ -112,17 +112,58 @@ def generic_library(
     return list(dict.fromkeys(canonical))  # drop duplicates, keep order
 
 
-PRESETS = ("planar", "quad6dof")
+def drag_terms(velocities: Sequence[str], angle: str | None = None) -> list[str]:
+    """Candidate drag terms: linear (rotor) drag and quadratic (body) drag.
+
+    For each velocity v: ``v`` and ``v norm(velocities)`` (force -(D + c |v|) v per axis,
+    |v| the speed). If the velocities are inertial and the body axes turn by ``angle`` in
+    their plane (the planar vehicle), the drag matrix R diag(D_lat, D_up) R^T also needs
+    ``v cos(2 angle)`` and ``v sin(2 angle)`` (each also times the norm); with equal drag on
+    both axes their coefficients are zero.
+
+    Args:
+        velocities: The air-relative velocity variables (e.g. ``y_dot, z_dot`` or ``u, v, w``).
+        angle: The body angle when the velocities are inertial; None for body-frame ones.
+
+    Returns:
+        Canonical feature names (duplicates removed).
+    """
+    speed = f"norm({' '.join(velocities)})" if len(velocities) > 1 else f"abs({velocities[0]})"
+    turns = ["", f"cos(2 {angle})", f"sin(2 {angle})"] if angle else [""]
+    names = [
+        " ".join(x for x in (v, turn, quad) if x)
+        for quad in ("", speed)
+        for turn in turns
+        for v in velocities
+    ]
+    return list(dict.fromkeys(term_name(parse_term(n)) for n in names))
+
+
+def planar_drag_library() -> list[str]:
+    """The planar library plus drag terms of (y_dot, z_dot) turned by phi (34 terms)."""
+    return list(dict.fromkeys([*planar_library(), *drag_terms(["y_dot", "z_dot"], "phi")]))
+
+
+def quad6dof_drag_library() -> list[str]:
+    """The 6-DOF library plus quadratic drag of the body velocities (522 terms)."""
+    return list(dict.fromkeys([*quad6dof_library(), *drag_terms(["u", "v", "w"])]))
+
+
+PRESETS = ("planar", "quad6dof", "planar_drag", "quad6dof_drag")
 """Names of the preset libraries."""
 
 
 def default_library(system: str) -> list[str]:
-    """The physics-informed default library of ``planar`` or ``quad6dof``."""
+    """The physics-informed default library of a preset (:data:`PRESETS`)."""
     if system == "planar":
         return planar_library()
     if system == "quad6dof":
         return quad6dof_library()
-    raise ValueError(f"unknown system {system!r}; valid choices: planar, quad6dof")
+    if system == "planar_drag":
+        return planar_drag_library()
+    if system == "quad6dof_drag":
+        return quad6dof_drag_library()
+    raise ValueError(f"unknown system {system!r}; valid choices: {', '.join(PRESETS)}")
 
 
 @dataclass(frozen=True)
@@ -136,6 +177,9 @@ class LibrarySpec:
         trig_products: Multiply each Fourier term by every degree-1 monomial (states and inputs).
         input_products: Multiply each Fourier term by each input only (when not trig_products).
         extra: Further named features in the grammar of :mod:`identification.features`.
+        drag: Velocity variables that get drag terms (:func:`drag_terms`); empty for none.
+        drag_angle: The body angle turning inertial drag velocities (planar ``phi``); empty
+            for body-frame velocities.
     """
 
     degree: int = 2
@@ -144,6 +188,8 @@ class LibrarySpec:
     trig_products: bool = True
     input_products: bool = True
     extra: tuple[str, ...] = field(default_factory=tuple)
+    drag: tuple[str, ...] = field(default_factory=tuple)
+    drag_angle: str = ""
 
     def build(self, state_names: Sequence[str], input_names: Sequence[str]) -> list[str]:
         """The feature names for these variables (duplicates removed, order kept)."""
@@ -167,6 +213,8 @@ class LibrarySpec:
         mult = [m for m in mult if m not in self.angles]
         names += [f"{m} {f}" if m else f for f in fourier for m in ["", *mult]]
         names += list(self.extra)
+        if self.drag:
+            names += drag_terms(self.drag, self.drag_angle or None)
         canonical = [term_name(parse_term(n, variables)) for n in names]
         return list(dict.fromkeys(canonical))
 
@@ -183,8 +231,10 @@ def _parse_spec_text(text: str) -> dict[str, object]:
             out[key] = int(value)
         elif key in ("trig_products", "input_products"):
             out[key] = value.strip().lower() in ("1", "true", "yes")
-        elif key in ("angles", "extra"):
+        elif key in ("angles", "extra", "drag"):
             out[key] = tuple(v.strip() for v in value.split(",") if v.strip())
+        elif key == "drag_angle":
+            out[key] = value.strip()
         else:
             raise ValueError(f"unknown library spec key {key!r}")
     return out
@@ -201,7 +251,8 @@ def library_from_spec(
     Args:
         spec: ``planar`` / ``quad6dof`` (presets); a path to a TOML file with a ``[library]``
             table (keys of :class:`LibrarySpec`); a string such as
-            ``degree=2;angles=phi;extra=u1 sin(phi)``; a :class:`LibrarySpec`; a list of
+            ``degree=2;angles=phi;extra=u1 sin(phi);drag=y_dot,z_dot;drag_angle=phi``; a
+            :class:`LibrarySpec`; a list of
             feature names; or None (``degree=2`` with the declared ``angles``).
         state_names: The data's states.
         input_names: The data's inputs.
@@ -248,7 +299,7 @@ def _read_toml(path: Path, angles: Sequence[str]) -> dict[str, object]:
     if unknown:
         raise ValueError(f"{path}: unknown key(s) {unknown}; valid: {sorted(allowed)}")
     out = dict(table)
-    for key in ("angles", "extra"):
+    for key in ("angles", "extra", "drag"):
         if key in out:
             out[key] = tuple(out[key])
     out.setdefault("angles", tuple(angles))
