@@ -1,0 +1,539 @@
+"""Identification of the discrepancy: drag and rotor dynamics, found from data alone.
+
+The paper names unmodelled disturbances and discrepancy models as future work. Here the
+environments fly with their effects switched on (:class:`quad_envs.physics.Effects`) and the
+truth-free identifier (:func:`identification.selection.select_model`) sees only the recorded
+flights. Truth enters only afterwards, to score what it returned:
+
+* **Drag** (:func:`drag_study`): linear rotor drag and quadratic body drag on the planar
+  vehicle. The drag force is R diag(D_lat + c_lat |v|, D_up + c_up |v|) R^T v in the inertial
+  velocities, so the library needs ``v``, ``v cos(2 phi)``, ``v sin(2 phi)`` and each of them
+  times ``norm(y_dot z_dot)`` (:func:`identification.libraries.drag_terms`, preset
+  ``planar_drag``). The true coefficient of every such term follows from
+  :func:`quad_envs.dynamics.planar_drag` by least squares on random points (exact: the terms
+  span the force), and the four physical coefficients are recovered from the found ones.
+* **Rotor dynamics, observed** (:func:`rotor_study`): the rotor thrusts T1, T2 are states,
+  the commanded (limited) rotor thrusts Tc1, Tc2 are the inputs; the thrust equations
+  T_i' = (Tc_i - T_i) / tau give the time constant twice per rotor.
+* **Rotor dynamics, hidden** (:func:`drift_study`): the same flights with only the rigid-body
+  state and the commanded collective input [u1, u2] = M Tc. No model with these states can be
+  exact; the study reports what the identifier returns and how its open-loop predictions
+  drift over horizons, beside the identifier on lag-free flights, the observed-rotor model and
+  the true rigid-body model that ignores the lag.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import quad_envs  # noqa: F401 (registers the ids)
+from identification.data import Trajectory
+from identification.experiments.synthetic import SupportCheck, check_support
+from identification.features import compile_features, parse_term, term_name
+from identification.libraries import LibrarySpec, drag_terms, planar_drag_library, planar_library
+from identification.model import IdentifiedModel
+from identification.rollouts import excitation_rollouts
+from identification.selection import select_model
+from quad_envs.dynamics import planar_drag, planar_rhs
+from quad_envs.integrators import rk4_step
+from quad_envs.params import PlanarQuadParams, get_preset
+from quad_envs.trajectories import RandomWaypoints
+
+ENV_ID = "PlanarQuad-v0"
+VELOCITIES = ("y_dot", "z_dot")
+RIGID_STATES = ("y", "z", "phi", "y_dot", "z_dot", "phi_dot")
+ROTOR_STATES = ("T1", "T2")
+ROTOR_INPUTS = ("Tc1", "Tc2")
+DRAG_FIELDS = ("drag_linear_xy", "drag_linear_z", "drag_quadratic_xy", "drag_quadratic_z")
+ROTOR_LIBRARY = LibrarySpec(degree=1, angles=("phi",))
+"""Library of the observed-rotor case: 1, every variable, and each times sin(phi), cos(phi)."""
+
+
+def planar_params(vehicle: str | PlanarQuadParams) -> PlanarQuadParams:
+    """A planar parameter set from a preset name or itself."""
+    if isinstance(vehicle, PlanarQuadParams):
+        return vehicle
+    return get_preset(vehicle, "planar")  # type: ignore[return-value]
+
+
+# -- truth (used only to score) ------------------------------------------------------------
+
+
+def drag_truth_terms(params: PlanarQuadParams) -> dict[str, dict[str, float]]:
+    """True coefficients of the drag terms in the y_dot and z_dot equations.
+
+    The acceleration F(phi, v) / m of :func:`quad_envs.dynamics.planar_drag` is fitted by least
+    squares on 400 random points with the terms of :func:`drag_terms`; the residual must be
+    at rounding level (the terms span the force exactly), else this raises.
+    """
+    names = drag_terms(VELOCITIES, "phi")
+    rng = np.random.default_rng(0)
+    n = 400
+    phi = rng.uniform(-1.0, 1.0, n)
+    vel = rng.uniform(-3.0, 3.0, (n, 2))
+    fy, fz = planar_drag(
+        phi, vel[:, 0], vel[:, 1], params.drag_linear_xy, params.drag_linear_z,
+        params.drag_quadratic_xy, params.drag_quadratic_z,
+    )  # fmt: skip
+    acc = np.stack([fy, fz], axis=1) / params.mass
+    x = np.zeros((n, 6))
+    x[:, 2], x[:, 3:5] = phi, vel
+    theta = compile_features(names, RIGID_STATES, ("u1", "u2"))(x, np.zeros((n, 2)))
+    coef, *_ = np.linalg.lstsq(theta, acc, rcond=None)
+    residual = np.abs(theta @ coef - acc).max()
+    if residual > 1e-9 * max(np.abs(acc).max(), 1e-12):
+        raise AssertionError(f"drag terms do not span the drag force (residual {residual:.2e})")
+    scale = np.abs(coef).max()
+    out: dict[str, dict[str, float]] = {"y_dot": {}, "z_dot": {}}
+    for j, name in enumerate(names):
+        for i, state in enumerate(("y_dot", "z_dot")):
+            if abs(coef[j, i]) > 1e-9 * scale:
+                out[state][name] = float(coef[j, i])
+    return out
+
+
+def planar_truth(
+    params: PlanarQuadParams, drag: bool = False, rotors: bool = False
+) -> dict[str, dict[str, float]]:
+    """The true model {state: {term: coefficient}} of the planar vehicle with effects."""
+    inv_m, g = 1.0 / params.mass, params.gravity
+    truth: dict[str, dict[str, float]] = {
+        "y": {"y_dot": 1.0},
+        "z": {"z_dot": 1.0},
+        "phi": {"phi_dot": 1.0},
+    }
+    if rotors:
+        arm, tau = params.arm_length, params.rotor_time_constant
+        truth["y_dot"] = {"T1 sin(phi)": -inv_m, "T2 sin(phi)": -inv_m}
+        truth["z_dot"] = {"1": -g, "T1 cos(phi)": inv_m, "T2 cos(phi)": inv_m}
+        truth["phi_dot"] = {"T1": -arm / params.Ixx, "T2": arm / params.Ixx}
+        for t, tc in zip(ROTOR_STATES, ROTOR_INPUTS, strict=True):
+            truth[t] = {t: -1.0 / tau, tc: 1.0 / tau}
+    else:
+        truth["y_dot"] = {"u1 sin(phi)": -inv_m}
+        truth["z_dot"] = {"1": -g, "u1 cos(phi)": inv_m}
+        truth["phi_dot"] = {"u2": 1.0 / params.Ixx}
+    if drag:
+        for state, terms in drag_truth_terms(params).items():
+            truth[state].update(terms)
+    return {s: {term_name(parse_term(n)): v for n, v in t.items()} for s, t in truth.items()}
+
+
+def coefficient(model: IdentifiedModel, state: str, term: str) -> float:
+    """The model's coefficient of ``term`` in the equation of ``state`` (0 if absent)."""
+    key = parse_term(term)
+    i = model.state_names.index(state)
+    return float(
+        sum(
+            model.coefficients[i, j]
+            for j, n in enumerate(model.feature_names)
+            if parse_term(n) == key
+        )
+    )
+
+
+# -- data ----------------------------------------------------------------------------------
+
+
+def drag_flights(
+    vehicle: str | PlanarQuadParams = "crazyflie",
+    episodes: int = 3,
+    steps: int = 1000,
+    seed: int = 0,
+    noise: float = 0.15,
+) -> list[Trajectory]:
+    """PD flights between random waypoints plus input noise, with drag on (applied inputs)."""
+    kwargs: dict[str, Any] = {"effects": {"drag": True}}
+    if isinstance(vehicle, str):
+        kwargs["vehicle"] = vehicle
+    else:
+        kwargs["params"] = vehicle
+    return excitation_rollouts(ENV_ID, episodes, seed, steps, noise, env_kwargs=kwargs)
+
+
+@dataclass
+class RotorFlights:
+    """The same flights seen two ways.
+
+    Attributes:
+        observed: States rigid body + rotor thrusts (T1, T2), inputs the commanded rotor
+            thrusts after the limits (Tc1, Tc2).
+        hidden: States rigid body only, inputs the commanded collective [u1, u2] = M Tc.
+    """
+
+    observed: list[Trajectory]
+    hidden: list[Trajectory]
+
+
+def rotor_flights(
+    vehicle: str | PlanarQuadParams = "crazyflie",
+    episodes: int = 3,
+    steps: int = 1000,
+    seed: int = 0,
+    noise: float = 0.15,
+    rotor_dynamics: bool = True,
+) -> RotorFlights:
+    """PD flights between random waypoints in the per-rotor action mode, rotors recorded.
+
+    The PD's collective command is split into rotor thrusts (M^-1 u) and Gaussian noise of
+    ``noise`` times the half-width of the rotor box is added per rotor; the env clips the
+    command to the box. With ``rotor_dynamics=False`` the rotors follow at once (the
+    ``observed`` flights then show T = Tc).
+    """
+    params = planar_params(vehicle)
+    env = gym.make(
+        ENV_ID,
+        params=params,
+        effects={"rotor_dynamics": rotor_dynamics},
+        action_mode="rotor_thrusts",
+        duration=steps * 0.01 + 1.0,
+    )
+    base = env.unwrapped
+    pd = base.vehicle.default_controller()
+    mixer = params.mixer
+    unmix = np.linalg.inv(mixer)
+    low, high = env.action_space.low.astype(float), env.action_space.high.astype(float)
+    half = 0.5 * (high - low)
+    rng = np.random.default_rng(seed)
+    observed, hidden = [], []
+    for ep in range(episodes):
+        ref = RandomWaypoints.sample(
+            rng, ndim=2, num_waypoints=int(steps * 0.01 / 1.5) + 2, low=(-1.5, 0.5),
+            high=(1.5, 2.0), segment_time=1.5,
+        )  # fmt: skip
+        _, info = env.reset(seed=seed + ep, options={"trajectory": ref})
+        ts, xs, thrusts, commands = [], [], [], []
+        for _ in range(steps):
+            command = unmix @ pd(info["state"], info["reference"])
+            command = np.clip(command + noise * half * rng.standard_normal(2), low, high)
+            ts.append(info["time"])
+            xs.append(info["state"])
+            thrusts.append(info["rotor_thrusts"] if rotor_dynamics else command)
+            commands.append(command)
+            _, _, terminated, truncated, info = env.step(command.astype(env.action_space.dtype))
+            if terminated or truncated:
+                break
+        if len(ts) < 50:
+            continue
+        t, x, tc = np.array(ts), np.array(xs), np.array(commands)
+        meta = {"env": ENV_ID, "seed": seed + ep, "rotor_dynamics": rotor_dynamics}
+        observed.append(
+            Trajectory(
+                t,
+                np.hstack([x, np.array(thrusts)]),
+                tc,
+                (*RIGID_STATES, *ROTOR_STATES),
+                ROTOR_INPUTS,
+                meta=meta,
+            )  # fmt: skip
+        )
+        hidden.append(Trajectory(t, x, tc @ mixer.T, RIGID_STATES, ("u1", "u2"), meta=meta))
+    env.close()
+    return RotorFlights(observed, hidden)
+
+
+# -- studies -------------------------------------------------------------------------------
+
+
+@dataclass
+class CoefficientRow:
+    """One true term: where it is, its true and found coefficient."""
+
+    state: str
+    term: str
+    true: float
+    found: float
+
+    @property
+    def rel_error(self) -> float:
+        """|found - true| / |true|."""
+        return abs(self.found - self.true) / abs(self.true)
+
+
+@dataclass
+class DragResult:
+    """What the identifier returned on drag flights, scored against the truth.
+
+    Attributes:
+        vehicle: Label of the vehicle.
+        model: The identified model.
+        support: Missed and spurious terms, worst relative coefficient error.
+        rows: The true drag terms with found coefficients.
+        physical: {field: (true, found)} of the drag coefficients D_xy, D_z, c_xy, c_z,
+            recovered from the found term coefficients and the found 1/m.
+        seconds: Wall time of the identification.
+        rows_of_data: Rows of data used.
+    """
+
+    vehicle: str
+    model: IdentifiedModel
+    support: SupportCheck
+    rows: list[CoefficientRow]
+    physical: dict[str, tuple[float, float]]
+    seconds: float
+    rows_of_data: int
+
+    @property
+    def worst_drag_error(self) -> float:
+        """Largest relative error over the true drag terms."""
+        return max(r.rel_error for r in self.rows)
+
+
+def _drag_jacobian(params: PlanarQuadParams, keys: list[tuple[str, str]]) -> np.ndarray:
+    """d(term coefficients)/d(drag field / m): the terms are linear in the four drag fields."""
+    cols = []
+    for name in DRAG_FIELDS:
+        unit = params.replace(**{f: 0.0 for f in DRAG_FIELDS}).replace(**{name: params.mass})
+        truth = drag_truth_terms(unit)
+        cols.append([truth[s].get(t, 0.0) for s, t in keys])
+    return np.array(cols).T
+
+
+def drag_study(
+    vehicle: str | PlanarQuadParams = "crazyflie",
+    episodes: int = 3,
+    steps: int = 1000,
+    seed: int = 0,
+    n_models: int = 20,
+    label: str | None = None,
+) -> DragResult:
+    """Identifies the planar vehicle with drag on from its flights alone and scores it."""
+    params = planar_params(vehicle)
+    trajs = drag_flights(params, episodes, steps, seed)
+    start = time.perf_counter()
+    model, _ = select_model(trajs, planar_drag_library(), n_models=n_models, seed=seed)
+    seconds = time.perf_counter() - start
+    truth = planar_truth(params, drag=True)
+    drag = drag_truth_terms(params)
+    rows = [
+        CoefficientRow(s, term_name(parse_term(t)), v, coefficient(model, s, t))
+        for s, terms in drag.items()
+        for t, v in terms.items()
+    ]
+    # Physical coefficients from all term coefficients (least squares), scaled by found m.
+    keys = [(s, t) for s in ("y_dot", "z_dot") for t in drag_terms(VELOCITIES, "phi")]
+    jac = _drag_jacobian(params, keys)
+    found = np.array([coefficient(model, s, t) for s, t in keys])
+    per_mass, *_ = np.linalg.lstsq(jac, found, rcond=None)
+    mass_found = -1.0 / coefficient(model, "y_dot", "u1 sin(phi)")
+    physical = {
+        name: (float(getattr(params, name)), float(per_mass[k] * mass_found))
+        for k, name in enumerate(DRAG_FIELDS)
+    }
+    return DragResult(
+        label or (vehicle if isinstance(vehicle, str) else "custom"), model,
+        check_support(model, truth), rows, physical, seconds, sum(len(t) for t in trajs),
+    )  # fmt: skip
+
+
+@dataclass
+class RotorResult:
+    """The observed-rotor identification scored against the truth.
+
+    Attributes:
+        vehicle: Label of the vehicle.
+        model: The identified model (8 states, inputs Tc1, Tc2).
+        support: Missed and spurious terms, worst relative coefficient error.
+        tau_true: The rotor time constant [s].
+        tau_found: {"T1 from T1": ..., "T1 from Tc1": ..., ...}: -1/coef of T_i and
+            1/coef of Tc_i in the equation of T_i [s].
+        seconds: Wall time of the identification.
+        rows_of_data: Rows of data used.
+    """
+
+    vehicle: str
+    model: IdentifiedModel
+    support: SupportCheck
+    tau_true: float
+    tau_found: dict[str, float]
+    seconds: float
+    rows_of_data: int
+
+    @property
+    def worst_tau_error(self) -> float:
+        """Largest relative error of the four estimates of tau."""
+        return max(abs(v - self.tau_true) / self.tau_true for v in self.tau_found.values())
+
+
+def identify_rotors(
+    trajs: Sequence[Trajectory], n_models: int = 20, seed: int = 0
+) -> tuple[IdentifiedModel, float]:
+    """The identifier on observed-rotor flights with :data:`ROTOR_LIBRARY`; (model, seconds)."""
+    library = ROTOR_LIBRARY.build(trajs[0].state_names, trajs[0].input_names)
+    start = time.perf_counter()
+    model, _ = select_model(trajs, library, n_models=n_models, seed=seed)
+    return model, time.perf_counter() - start
+
+
+def rotor_study(
+    vehicle: str | PlanarQuadParams = "crazyflie",
+    episodes: int = 3,
+    steps: int = 1000,
+    seed: int = 0,
+    n_models: int = 20,
+    flights: RotorFlights | None = None,
+    label: str | None = None,
+) -> RotorResult:
+    """Identifies the time constant from flights with the rotor thrusts observed."""
+    params = planar_params(vehicle)
+    flights = flights or rotor_flights(params, episodes, steps, seed)
+    model, seconds = identify_rotors(flights.observed, n_models, seed)
+    tau_found = {}
+    for t, tc in zip(ROTOR_STATES, ROTOR_INPUTS, strict=True):
+        tau_found[f"{t} from {t}"] = -1.0 / coefficient(model, t, t)
+        tau_found[f"{t} from {tc}"] = 1.0 / coefficient(model, t, tc)
+    return RotorResult(
+        label or (vehicle if isinstance(vehicle, str) else "custom"), model,
+        check_support(model, planar_truth(params, rotors=True)), params.rotor_time_constant,
+        tau_found, seconds, sum(len(t) for t in flights.observed),
+    )  # fmt: skip
+
+
+# -- drift over horizons -------------------------------------------------------------------
+
+HORIZONS = (1, 2, 5, 10, 20, 50, 100)
+"""Prediction horizons of the drift study [control steps of 0.01 s]."""
+
+
+def drift(
+    rhs: Any,
+    trajs: Sequence[Trajectory],
+    horizons: Sequence[int] = HORIZONS,
+    stride: int = 20,
+    n_rigid: int = 6,
+) -> dict[str, np.ndarray]:
+    """Open-loop prediction error of ``rhs`` against recorded flights, per horizon.
+
+    From every ``stride``-th row (with room for the longest horizon), the model is integrated
+    by RK4 with the recorded inputs held per step, from the recorded state.
+
+    Returns:
+        ``position`` (RMS of the position error [m]), ``phi`` (RMS attitude error [rad]) and
+        ``diverged`` (fraction of non-finite predictions), each of shape (len(horizons),).
+    """
+    longest = max(horizons)
+    pos = {h: [] for h in horizons}
+    ang = {h: [] for h in horizons}
+    bad = {h: 0 for h in horizons}
+    count = 0
+    for tr in trajs:
+        starts = np.arange(0, len(tr) - longest - 1, stride)
+        if len(starts) == 0:
+            continue
+        count += len(starts)
+        x = tr.x[starts].copy()
+        for k in range(1, longest + 1):
+            rows = starts + k - 1
+            dt = (tr.t[rows + 1] - tr.t[rows])[:, None]
+            with np.errstate(all="ignore"):
+                x = rk4_step(rhs, x, tr.u[rows], dt, 1)
+            if k in pos:
+                true = tr.x[starts + k]
+                err = x[:, :n_rigid] - true[:, :n_rigid]
+                ok = np.all(np.isfinite(err), axis=1) & (np.abs(err).max(axis=1) < 1e3)
+                bad[k] += int((~ok).sum())
+                pos[k].extend(np.sum(err[ok, :2] ** 2, axis=1))
+                ang[k].extend(err[ok, 2] ** 2)
+    return {
+        "position": np.array([np.sqrt(np.mean(pos[h])) if pos[h] else np.inf for h in horizons]),
+        "phi": np.array([np.sqrt(np.mean(ang[h])) if ang[h] else np.inf for h in horizons]),
+        "diverged": np.array([bad[h] / max(count, 1) for h in horizons]),
+    }
+
+
+@dataclass
+class DriftResult:
+    """Rotor dynamics hidden: what the identifier returns and how its predictions drift.
+
+    Attributes:
+        vehicle: Label of the vehicle.
+        hidden_model: Identified from the rigid-body states and commanded [u1, u2].
+        hidden_support: It against the lag-free rigid-body truth.
+        observed_model: Identified with the rotor thrusts observed (reference).
+        lagfree_model: Identified on flights without rotor dynamics (reference).
+        errors: {label: drift dict} on held-out flights (:func:`drift`).
+        horizons: Horizons [steps].
+        dt: Control step [s].
+        seconds: Wall time of each identification.
+    """
+
+    vehicle: str
+    hidden_model: IdentifiedModel
+    hidden_support: SupportCheck
+    observed_model: IdentifiedModel
+    lagfree_model: IdentifiedModel
+    errors: dict[str, dict[str, np.ndarray]]
+    horizons: tuple[int, ...]
+    dt: float = 0.01
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def drift_study(
+    vehicle: str | PlanarQuadParams = "crazyflie",
+    episodes: int = 3,
+    steps: int = 1000,
+    seed: int = 0,
+    n_models: int = 20,
+    horizons: Sequence[int] = HORIZONS,
+    label: str | None = None,
+) -> DriftResult:
+    """Rotor dynamics on but unobserved: identify, then measure the drift on new flights."""
+    params = planar_params(vehicle)
+    train = rotor_flights(params, episodes, steps, seed)
+    test = rotor_flights(params, 2, steps, seed + 100)
+    lagfree_train = rotor_flights(params, episodes, steps, seed, rotor_dynamics=False)
+    lagfree_test = rotor_flights(params, 2, steps, seed + 100, rotor_dynamics=False)
+    library = planar_library()
+    seconds = {}
+    start = time.perf_counter()
+    hidden, _ = select_model(train.hidden, library, n_models=n_models, seed=seed)
+    seconds["hidden"] = time.perf_counter() - start
+    observed, seconds["observed"] = identify_rotors(train.observed, n_models, seed)
+    start = time.perf_counter()
+    lagfree, _ = select_model(lagfree_train.hidden, library, n_models=n_models, seed=seed)
+    seconds["lag-free"] = time.perf_counter() - start
+
+    def rigid(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return planar_rhs(x, u, params)
+
+    errors = {
+        "no rotor lag: identified": drift(lagfree.rhs, lagfree_test.hidden, horizons),
+        "lag, rotors observed: identified": drift(observed.rhs, test.observed, horizons),
+        "lag, rotors hidden: identified": drift(hidden.rhs, test.hidden, horizons),
+        "lag, rotors hidden: true rigid body": drift(rigid, test.hidden, horizons),
+    }
+    return DriftResult(
+        label or (vehicle if isinstance(vehicle, str) else "custom"), hidden,
+        check_support(hidden, planar_truth(params)), observed, lagfree, errors,
+        tuple(horizons), 0.01, seconds,
+    )  # fmt: skip
+
+
+def plot_drift(result: DriftResult, path: str) -> None:
+    """Position and attitude RMS error against the horizon, log-log, one line per model."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    seconds = np.array(result.horizons) * result.dt
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for label, err in result.errors.items():
+        for ax, key in zip(axes, ("position", "phi"), strict=True):
+            ax.loglog(seconds, np.maximum(err[key], 1e-16), marker="o", label=label)
+    axes[0].set_ylabel("RMS position error [m]")
+    axes[1].set_ylabel("RMS roll error [rad]")
+    for ax in axes:
+        ax.set_xlabel("prediction horizon [s]")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"Open-loop drift on held-out flights ({result.vehicle}, planar)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
