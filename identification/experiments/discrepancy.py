@@ -40,6 +40,7 @@ from identification.libraries import LibrarySpec, drag_terms, planar_drag_librar
 from identification.model import IdentifiedModel
 from identification.rollouts import excitation_rollouts
 from identification.selection import select_model
+from quad_envs.controllers import PlanarPD, PlanarPDGains
 from quad_envs.dynamics import planar_drag, planar_rhs
 from quad_envs.integrators import rk4_step
 from quad_envs.params import PlanarQuadParams, get_preset
@@ -53,6 +54,15 @@ ROTOR_INPUTS = ("Tc1", "Tc2")
 DRAG_FIELDS = ("drag_linear_xy", "drag_linear_z", "drag_quadratic_xy", "drag_quadratic_z")
 ROTOR_LIBRARY = LibrarySpec(degree=1, angles=("phi",))
 """Library of the observed-rotor case: 1, every variable, and each times sin(phi), cos(phi)."""
+OTHER_VEHICLE = PlanarQuadParams(
+    mass=0.6, Ixx=4e-3, arm_length=0.15, rotor_force_max=0.6 * 9.81 * 1.2,
+    rotor_time_constant=0.04, drag_linear_xy=0.09, drag_linear_z=0.03,
+    drag_quadratic_xy=0.012, drag_quadratic_z=0.02,
+)  # fmt: skip
+"""A third planar vehicle, neither preset: 0.6 kg, unequal drag on both axes, tau = 0.04 s."""
+SOFT_GAINS = PlanarPDGains(kp_z=16.0, kv_z=8.0, kp_phi=30.0, kv_phi=10.0, kp_y=6.0, kv_y=5.0)
+"""PD gains for flights with rotor lag: the paper's attitude loop (80, 20) is unstable on the
+Crazyflie with its 0.072 s rotor time constant; these keep it well inside 1/tau."""
 
 
 def planar_params(vehicle: str | PlanarQuadParams) -> PlanarQuadParams:
@@ -176,15 +186,16 @@ def rotor_flights(
     episodes: int = 3,
     steps: int = 1000,
     seed: int = 0,
-    noise: float = 0.15,
+    noise: float = 0.05,
     rotor_dynamics: bool = True,
+    gains: PlanarPDGains = SOFT_GAINS,
 ) -> RotorFlights:
     """PD flights between random waypoints in the per-rotor action mode, rotors recorded.
 
     The PD's collective command is split into rotor thrusts (M^-1 u) and Gaussian noise of
     ``noise`` times the half-width of the rotor box is added per rotor; the env clips the
     command to the box. With ``rotor_dynamics=False`` the rotors follow at once (the
-    ``observed`` flights then show T = Tc).
+    ``observed`` flights then show T = Tc). The PD uses ``gains`` (:data:`SOFT_GAINS`).
     """
     params = planar_params(vehicle)
     env = gym.make(
@@ -194,8 +205,7 @@ def rotor_flights(
         action_mode="rotor_thrusts",
         duration=steps * 0.01 + 1.0,
     )
-    base = env.unwrapped
-    pd = base.vehicle.default_controller()
+    pd = PlanarPD(params, gains)
     mixer = params.mixer
     unmix = np.linalg.inv(mixer)
     low, high = env.action_space.low.astype(float), env.action_space.high.astype(float)
@@ -537,3 +547,62 @@ def plot_drift(result: DriftResult, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+# -- tables --------------------------------------------------------------------------------
+
+
+def drag_table(results: Sequence[DragResult]) -> str:
+    """Markdown: per vehicle, support, worst drag-term error and the physical coefficients."""
+    lines = [
+        "| vehicle | rows | time [s] | terms | missed | spurious | worst drag-term err | "
+        "D_xy true / found | D_z true / found | c_xy true / found | c_z true / found |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        phys = " | ".join(f"{t:.4g} / {f:.4g}" for t, f in r.physical.values())
+        lines.append(
+            f"| {r.vehicle} | {r.rows_of_data} | {r.seconds:.1f} | {r.support.n_terms} | "
+            f"{len(r.support.missed)} | {len(r.support.spurious)} | {r.worst_drag_error:.1e} | "
+            f"{phys} |"
+        )
+    return "\n".join(lines)
+
+
+def drag_terms_table(result: DragResult) -> str:
+    """Markdown: every true drag term with its true and found coefficient."""
+    lines = ["| equation | term | true | found | rel err |", "|---|---|---|---|---|"]
+    for row in result.rows:
+        lines.append(
+            f"| {row.state}' | `{row.term}` | {row.true:.6g} | {row.found:.6g} | "
+            f"{row.rel_error:.1e} |"
+        )
+    return "\n".join(lines)
+
+
+def rotor_table(results: Sequence[RotorResult]) -> str:
+    """Markdown: per vehicle, support and the four estimates of tau."""
+    lines = [
+        "| vehicle | rows | time [s] | terms | missed | spurious | tau true [s] | "
+        "tau found [s] (T1, T2 from T_i; from Tc_i) | worst tau err |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in results:
+        found = ", ".join(f"{v:.6g}" for v in r.tau_found.values())
+        lines.append(
+            f"| {r.vehicle} | {r.rows_of_data} | {r.seconds:.1f} | {r.support.n_terms} | "
+            f"{len(r.support.missed)} | {len(r.support.spurious)} | {r.tau_true:.4g} | "
+            f"{found} | {r.worst_tau_error:.1e} |"
+        )
+    return "\n".join(lines)
+
+
+def drift_table(result: DriftResult) -> str:
+    """Markdown: RMS position [m] and roll [rad] errors per horizon and model."""
+    head = " | ".join(f"{h * result.dt:g} s" for h in result.horizons)
+    lines = [f"| model | error | {head} |", "|---|---|" + "---|" * len(result.horizons)]
+    for label, err in result.errors.items():
+        for key, unit in (("position", "m"), ("phi", "rad")):
+            cells = " | ".join(f"{v:.2g}" for v in err[key])
+            lines.append(f"| {label} | {key} [{unit}] | {cells} |")
+    return "\n".join(lines)
