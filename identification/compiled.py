@@ -2,13 +2,14 @@
 
 :func:`compiled_rhs` turns a model into a callable that is the model's own batched numpy
 ``rhs(x, u)`` and also carries ``point(x, u, out)``: the same sum of terms generated as
-straight-line scalar code and compiled by numba. The environments run a ``rhs`` with a
-``point`` attribute inside their compiled step kernel (:mod:`quad_envs.physics`), so a
-surrogate steps about as fast as the ground truth.
+straight-line scalar code (``point_source``) and compiled by numba. The environments run a
+``rhs`` with a ``point_source`` attribute inside their compiled step kernel
+(:mod:`quad_envs.physics`), so a surrogate steps about as fast as the ground truth.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numba
@@ -54,14 +55,27 @@ def point_source(model: IdentifiedModel) -> str:
 
 
 class CompiledRhs:
-    """A model's ``rhs(x, u)`` (numpy, batched) plus its numba ``point(x, u, out)``."""
+    """A model's ``rhs(x, u)`` (numpy, batched) plus the source of its scalar point rhs.
+
+    The environments see ``point_source`` and compile it into their step kernel
+    (:func:`quad_envs.physics.point_rhs_kernels`: written to the kernel cache folder and
+    cached on disk by numba, so a model is compiled once per machine, not per process).
+    """
 
     def __init__(self, model: IdentifiedModel) -> None:
         self.model = model
         self.source = point_source(model)
-        namespace: dict[str, Any] = {"math": __import__("math")}
-        exec(compile(self.source, "<quad-sindy point rhs>", "exec"), namespace)  # noqa: S102
-        self.point = numba.njit(namespace["point"])
+        self.point_source = self.source
+        self._point: Any = None
+
+    @property
+    def point(self) -> Any:
+        """The point rhs ``point(x, u, out)`` compiled alone by numba (for checks)."""
+        if self._point is None:
+            namespace: dict[str, Any] = {"math": math}
+            exec(compile(self.source, "<quad-sindy point rhs>", "exec"), namespace)  # noqa: S102
+            self._point = numba.njit(namespace["point"])
+        return self._point
 
     def __call__(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """dx/dt for states (..., n) and inputs (..., m) (the model's numpy rhs)."""

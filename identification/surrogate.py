@@ -8,6 +8,7 @@ saturation and RK4) with the ground-truth vector field replaced by the model's c
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,9 @@ import numpy as np
 from gymnasium.envs.registration import load_env_creator, register, registry
 
 import quad_envs
+import quad_envs.envs.base as quad_envs_base
 from identification.model import IdentifiedModel, load_model
+from quad_envs import physics
 from quad_envs.integrators import rk4_step
 
 
@@ -50,12 +53,51 @@ def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: b
     return model, cls
 
 
+def surrogate_rhs(model: IdentifiedModel, cls: Any, compiled: bool = True) -> Any:
+    """The rhs a surrogate env steps: the model compiled into the env's kernel, or numpy.
+
+    The compiled rhs (:func:`identification.compiled.compiled_rhs`) is built and compiled
+    here (numba caches it on disk, keyed by the model's generated source: a model costs its
+    compile time once per machine). If numba fails, the model's numpy ``rhs`` is returned
+    with a warning (the env then integrates it in Python, several times slower).
+    """
+    if not compiled:
+        return model.rhs
+    try:
+        from identification.compiled import compiled_rhs
+
+        rhs = compiled_rhs(model)
+        vehicle = cls.vehicle
+        kernels = physics.point_rhs_kernels(vehicle, rhs.point_source)
+        n_obs = vehicle.obs_bounds(quad_envs_base.DEFAULT_VOLUME)[0].size
+        physics.warm_up(
+            kernels, vehicle.n_states, vehicle.n_inputs, n_obs, vehicle.ndim,
+            vehicle.params.mixer,
+        )  # fmt: skip
+    except Exception as error:  # noqa: BLE001  (any numba or file-system failure)
+        warnings.warn(
+            f"compiling the model's rhs with numba failed ({type(error).__name__}: {error}); "
+            "the surrogate steps the numpy rhs instead (slower)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return model.rhs
+    return rhs
+
+
 def make_surrogate(
-    model: IdentifiedModel | str | Path | None = None, base_id: str = "PlanarQuad-v0", **kwargs: Any
+    model: IdentifiedModel | str | Path | None = None,
+    base_id: str = "PlanarQuad-v0",
+    compiled: bool = True,
+    **kwargs: Any,
 ) -> gym.Env:
-    """A single surrogate env: the base env stepping ``model.rhs``."""
+    """A single surrogate env: the base env stepping the model.
+
+    The model runs compiled inside the env's kernel (:func:`surrogate_rhs`);
+    ``compiled=False`` steps the numpy ``model.rhs`` (no compile time).
+    """
     model, cls = _resolve(model, base_id, vector=False)
-    env = cls(rhs=model.rhs, **kwargs)
+    env = cls(rhs=surrogate_rhs(model, cls, compiled), **kwargs)
     env.model = model
     return env
 
@@ -64,11 +106,12 @@ def make_surrogate_vector(
     model: IdentifiedModel | str | Path | None = None,
     base_id: str = "PlanarQuad-v0",
     num_envs: int = 1,
+    compiled: bool = True,
     **kwargs: Any,
 ) -> gym.vector.VectorEnv:
-    """A native vector surrogate env (batched ``model.rhs``)."""
+    """A native vector surrogate env (the model compiled as in :func:`make_surrogate`)."""
     model, cls = _resolve(model, base_id, vector=True)
-    env = cls(num_envs=num_envs, rhs=model.rhs, **kwargs)
+    env = cls(num_envs=num_envs, rhs=surrogate_rhs(model, cls, compiled), **kwargs)
     env.model = model
     return env
 

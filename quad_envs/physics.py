@@ -37,10 +37,18 @@ seed, the same in the single and the vector env.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import importlib
+import importlib.util
 import math
+import os
+import sys
 import types
+import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, fields
+from pathlib import Path
 from typing import Any
 
 import numba
@@ -194,7 +202,10 @@ PARAM_FIELDS: tuple[str, ...] = (
 )  # fmt: skip
 """Layout of the parameter vector the kernels read (I1..I3: Ixx or Jxx, Jyy, Jzz)."""
 
-(_MASS, _I1, _I2, _I3, _G, _TAU, _DXY, _DZ, _CXY, _CZ, _FMIN, _FMAX, _KT) = range(13)
+(P_MASS, P_I1, P_I2, P_I3, P_GRAVITY, P_TAU, P_DRAG_LINEAR_XY, P_DRAG_LINEAR_Z,
+ P_DRAG_QUADRATIC_XY, P_DRAG_QUADRATIC_Z, P_FMIN, P_FMAX, P_KT) = range(13)  # fmt: skip
+"""Indices into the parameter vector, for the vehicles' point functions."""
+_MASS, _TAU, _FMIN, _FMAX, _KT = P_MASS, P_TAU, P_FMIN, P_FMAX, P_KT
 _INERTIA_ALIASES = {"I1": ("Jxx", "Ixx"), "I2": ("Jyy",), "I3": ("Jzz",)}
 
 
@@ -221,6 +232,8 @@ MODES = ("collective", "rotor_thrusts", "motor_speeds")
 )
 _WIND0 = 10
 N_CONSTS = 13
+C_ROTOR, C_DRAG = _ROTOR, _DRAG
+"""Indices of the rotor-dynamics and drag switches in the constants vector."""
 
 
 def pack_consts(
@@ -275,108 +288,12 @@ def _next_normal(rng: Any, i: int) -> float:
     return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
 
 
-# -- the vehicles' point functions (numba) -------------------------------------------------
+# -- shared pieces of the kernels (inlined into them) ------------------------------------
 
-_planar_field = numba.njit(cache=True, inline="always")(dynamics.planar_field)
-_planar_drag = numba.njit(cache=True, inline="always")(dynamics.planar_drag)
-_quad6dof_field = numba.njit(cache=True, inline="always")(dynamics.quad6dof_field)
-_rotation_entries = numba.njit(cache=True, inline="always")(dynamics.rotation_entries)
-_body_drag = numba.njit(cache=True, inline="always")(dynamics.body_drag)
-
-
-@numba.njit(cache=True, inline="always")
-def planar_point(x: Any, u: Any, thrust: Any, wind: Any, p: Any, c: Any, out: Any) -> None:
-    """Extended planar field at one point: rigid body (+ drag, wind, rotor lag).
-
-    Args:
-        x: Extended state (6, or 8 with rotor thrusts).
-        u: Collective input [u1, u2] (from the rotor thrusts in effect).
-        thrust: Commanded rotor thrusts (2,).
-        wind: Inertial wind (2,).
-        p: Parameter vector (:data:`PARAM_FIELDS`).
-        c: Constants vector.
-        out: dx/dt (written).
-    """
-    d = _planar_field(x[2], x[3], x[4], x[5], u[0], u[1], p[_MASS], p[_I1], p[_G])
-    for j in range(6):
-        out[j] = d[j]
-    if c[_DRAG] != 0.0:
-        fy, fz = _planar_drag(
-            x[2], x[3] - wind[0], x[4] - wind[1], p[_DXY], p[_DZ], p[_CXY], p[_CZ]
-        )
-        out[3] += fy / p[_MASS]
-        out[4] += fz / p[_MASS]
-    if c[_ROTOR] != 0.0:
-        for j in range(2):
-            out[6 + j] = (thrust[j] - x[6 + j]) / p[_TAU]
-
-
-@numba.njit(cache=True, inline="always")
-def quad6dof_point(x: Any, u: Any, thrust: Any, wind: Any, p: Any, c: Any, out: Any) -> None:
-    """Extended 6-DOF field at one point (see :func:`planar_point`; wind (3,))."""
-    d = _quad6dof_field(
-        x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10], x[11], u[0], u[1], u[2], u[3],
-        p[_MASS], p[_I1], p[_I2], p[_I3], p[_G],
-    )  # fmt: skip
-    for j in range(12):
-        out[j] = d[j]
-    if c[_DRAG] != 0.0:
-        r = _rotation_entries(
-            math.cos(x[3]), math.sin(x[3]), math.cos(x[4]), math.sin(x[4]),
-            math.cos(x[5]), math.sin(x[5]),
-        )  # fmt: skip
-        # Body-frame air velocity v_B - R^T w.
-        wx = r[0] * wind[0] + r[3] * wind[1] + r[6] * wind[2]
-        wy = r[1] * wind[0] + r[4] * wind[1] + r[7] * wind[2]
-        wz = r[2] * wind[0] + r[5] * wind[1] + r[8] * wind[2]
-        fx, fy, fz = _body_drag(x[6] - wx, x[7] - wy, x[8] - wz, p[_DXY], p[_DZ], p[_CXY], p[_CZ])
-        out[6] += fx / p[_MASS]
-        out[7] += fy / p[_MASS]
-        out[8] += fz / p[_MASS]
-    if c[_ROTOR] != 0.0:
-        for j in range(4):
-            out[12 + j] = (thrust[j] - x[12 + j]) / p[_TAU]
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
-_wrap_nb = numba.njit(cache=True, inline="always")(_wrap)
-
-
-@numba.njit(cache=True, inline="always")
-def planar_observe_point(x: Any, ref: Any, out: Any) -> None:
-    """[state, ref - position, ref - velocity] of one planar state (10 entries)."""
-    for j in range(6):
-        out[j] = x[j]
-    out[6] = ref[0] - x[0]
-    out[7] = ref[1] - x[1]
-    out[8] = ref[2] - x[3]
-    out[9] = ref[3] - x[4]
-
-
-@numba.njit(cache=True, inline="always")
-def quad6dof_observe_point(x: Any, ref: Any, out: Any) -> None:
-    """[state (yaw wrapped), ref - position, ref - inertial velocity, yaw error] (19)."""
-    for j in range(12):
-        out[j] = x[j]
-    out[5] = _wrap_nb(x[5])
-    r = _rotation_entries(
-        math.cos(x[3]), math.sin(x[3]), math.cos(x[4]), math.sin(x[4]),
-        math.cos(x[5]), math.sin(x[5]),
-    )  # fmt: skip
-    for j in range(3):
-        out[12 + j] = ref[j] - x[j]
-        v = r[3 * j] * x[6] + r[3 * j + 1] * x[7] + r[3 * j + 2] * x[8]
-        out[15 + j] = ref[3 + j] - v
-    out[18] = _wrap_nb(ref[9] - x[5])
-
-
-# -- the kernels -----------------------------------------------------------------------------
-#
-# Module-level and dispatching on a vehicle id, so that numba caches them on disk; surrogates
-# with a compiled point rhs get the same source rebound to their field (uncached).
+KERNEL_JIT: dict[str, Any] = {"cache": True, "_nrt": False, "error_model": "numpy"}
+"""numba options of the kernels' entry points: cached on disk, and without numba's reference
+counting, which costs two atomic operations per array view taken per member (about ten
+times the arithmetic of a planar RK4 step); the kernels therefore allocate nothing."""
 
 
 @numba.njit(cache=True, inline="always")
@@ -418,210 +335,180 @@ def _mix_into(mix, thrust, u):  # noqa: ANN001, ANN202
 
 
 @numba.njit(cache=True, inline="always")
-def _integrate_one(vid, n, x, thrust, wind, p, c, mix, u, scratch):  # noqa: ANN001, ANN202
-    """Classical RK4 (as :func:`quad_envs.integrators.rk4_step`) with the command held.
-
-    ``scratch`` is a (5, len(x)) work array (stages and the stage state).
-    """
-    ne = x.shape[0]
-    rotor = c[_ROTOR] != 0.0
-    h = c[_DT] / c[_SUBSTEPS]
-    k1, k2, k3, k4, xs = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
-    if not rotor:
-        _mix_into(mix, thrust, u)
-    for _ in range(int(c[_SUBSTEPS])):
-        if rotor:
-            _mix_into(mix, x[n:], u)
-        _field(vid, x, u, thrust, wind, p, c, k1)
-        for j in range(ne):
-            xs[j] = x[j] + (0.5 * h) * k1[j]
-        if rotor:
-            _mix_into(mix, xs[n:], u)
-        _field(vid, xs, u, thrust, wind, p, c, k2)
-        for j in range(ne):
-            xs[j] = x[j] + (0.5 * h) * k2[j]
-        if rotor:
-            _mix_into(mix, xs[n:], u)
-        _field(vid, xs, u, thrust, wind, p, c, k3)
-        for j in range(ne):
-            xs[j] = x[j] + h * k3[j]
-        if rotor:
-            _mix_into(mix, xs[n:], u)
-        _field(vid, xs, u, thrust, wind, p, c, k4)
-        for j in range(ne):
-            x[j] = x[j] + (h / 6.0) * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
-    if rotor:
-        _mix_into(mix, x[n:], u)
-
-
-@numba.njit(cache=True, inline="always")
-def _finish_one(vid, x, ref, c, rng, i, bias, obsbox, xbox, obs):  # noqa: ANN001, ANN202
-    """Observation (biased, noisy, clipped), reward and termination of one member."""
-    n = xbox.shape[1]
-    _observe(vid, x, ref, obs)
-    nobs = obs.shape[0]
-    if c[_OBS_ROTORS] != 0.0:
-        k = x.shape[0] - n
-        for j in range(k):
-            obs[nobs - k + j] = x[n + j]
-    out = False
-    for j in range(n):
-        if not (xbox[0, j] <= x[j] <= xbox[1, j]):  # NaN fails too
-            out = True
-    cost = 0.0
-    for j in range(nobs):
-        cost += obsbox[2, j] * obs[j] * obs[j]
-    reward = 0.0 if out else math.exp(-cost)
-    noise = c[_NOISE]
-    for j in range(nobs):
-        v = obs[j]
-        if not math.isfinite(v):  # only terminal states can have them
-            v = 0.0 if math.isnan(v) else (1e308 if v > 0 else -1e308)
-        v += bias[j]
-        if noise > 0.0:
-            v += noise * _next_normal(rng, i)
-        obs[j] = min(max(v, obsbox[0, j]), obsbox[1, j])
-    return reward, out
-
-
-@numba.njit(cache=True, inline="always")
 def _all_finite(A):  # noqa: ANN001, ANN202
-    for v in A.ravel():
-        if not math.isfinite(v):
-            return False
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            if not math.isfinite(A[i, j]):
+                return False
     return True
 
 
-@numba.njit(cache=True)
-def _step(vid, X, A, refs, P, C, rng, gust, bias, mix, unmix, box, frac, obsbox,
-          xbox, active):  # noqa: ANN001, ANN202  # fmt: skip
-    """Steps every active member in place; returns (obs, reward, end, u, u_cmd, ok)."""
-    b = X.shape[0]
-    m, k = mix.shape
-    n, nw = xbox.shape[1], gust.shape[1]
-    obs = np.empty((b, obsbox.shape[1]))
-    reward, end = np.zeros(b), np.zeros(b, dtype=np.bool_)
-    u_app, u_cmd = np.zeros((b, m)), np.zeros((b, m))
-    if not _all_finite(A):
-        return obs, reward, end, u_app, u_cmd, False
-    thrust, wind, raw = np.empty(k), np.empty(nw), np.empty(A.shape[1])
-    scratch = np.empty((5, X.shape[1]))
-    ga, gs = C[_GUST_A], C[_GUST_S]
-    for i in range(b):
-        p = P[i if P.shape[0] > 1 else 0]
-        if active[i]:
-            _command_one(A[i], p, C, mix, unmix, box, frac, thrust, u_cmd[i], raw)
-            for j in range(nw):
-                if gs > 0.0:
-                    gust[i, j] = ga * gust[i, j] + gs * _next_normal(rng, i)
-                wind[j] = C[_WIND0 + j] + gust[i, j]
-            _integrate_one(vid, n, X[i], thrust, wind, p, C, mix, u_app[i], scratch)
-        reward[i], end[i] = _finish_one(
-            vid, X[i], refs[i], C, rng, i, bias[i], obsbox, xbox, obs[i]
-        )
-    return obs, reward, end, u_app, u_cmd, True
+@numba.njit(**KERNEL_JIT)
+def command_batch(A, P, C, mix, unmix, box, frac, u_app, u_cmd, work):  # noqa: ANN001, ANN201
+    """Rotor commands -> applied and commanded collective inputs (written).
 
-
-@numba.njit(cache=True)
-def _finish(vid, X, refs, C, rng, bias, obsbox, xbox):  # noqa: ANN001, ANN202
-    b = X.shape[0]
-    obs = np.empty((b, obsbox.shape[1]))
-    reward, end = np.zeros(b), np.zeros(b, dtype=np.bool_)
-    for i in range(b):
-        reward[i], end[i] = _finish_one(
-            vid, X[i], refs[i], C, rng, i, bias[i], obsbox, xbox, obs[i]
-        )
-    return obs, reward, end
-
-
-@numba.njit(cache=True)
-def command_batch(A, P, C, mix, unmix, box, frac):  # noqa: ANN001, ANN201
-    """Rotor commands -> (applied collective input, commanded input, ok) for a Python field."""
+    For a vector field integrated in Python. Returns False if an action is not finite.
+    """
     b = A.shape[0]
     m, k = mix.shape
-    thrust, raw = np.empty(k), np.empty(A.shape[1])
-    u_app, u_cmd = np.zeros((b, m)), np.zeros((b, m))
     if not _all_finite(A):
-        return u_app, u_cmd, False
+        return False
+    thrust, raw = work[5, :k], work[7, : A.shape[1]]
     for i in range(b):
-        _command_one(A[i], P[i if P.shape[0] > 1 else 0], C, mix, unmix, box, frac, thrust,
-                     u_cmd[i], raw)  # fmt: skip
+        p = P[0] if P.shape[0] == 1 else P[i]
+        _command_one(A[i], p, C, mix, unmix, box, frac, thrust, u_cmd[i], raw)
         _mix_into(mix, thrust, u_app[i])
-    return u_app, u_cmd, True
+    return True
 
 
-PLANAR_ID, QUAD6DOF_ID = 0, 1
-VEHICLE_IDS = {"planar": PLANAR_ID, "quad6dof": QUAD6DOF_ID}
-"""Kernel ids of the vehicles."""
-
-
-@numba.njit(cache=True, inline="always")
-def _field(vid, x, u, thrust, wind, p, c, out):  # noqa: ANN001, ANN202
-    if vid == PLANAR_ID:
-        planar_point(x, u, thrust, wind, p, c, out)
-    else:
-        quad6dof_point(x, u, thrust, wind, p, c, out)
-
-
-@numba.njit(cache=True, inline="always")
-def _observe(vid, x, ref, out):  # noqa: ANN001, ANN202
-    if vid == PLANAR_ID:
-        planar_observe_point(x, ref, out)
-    else:
-        quad6dof_observe_point(x, ref, out)
+# -- kernels built per vector field ------------------------------------------------------
 
 
 @dataclass(frozen=True)
 class Kernels:
-    """The compiled entry points for one vehicle (and, for surrogates, one point rhs).
+    """The compiled entry points for one vector field and observation.
 
     Attributes:
-        vid: Vehicle id (:data:`VEHICLE_IDS`), the first argument of ``step`` and ``finish``.
-        step: ``(vid, X, A, refs, P, C, rng, gust, bias, mix, unmix, box, frac, obsbox,
-            xbox, active) -> (obs, reward, end, u, u_cmd, ok)``.
-        finish: ``(vid, X, refs, C, rng, bias, obsbox, xbox) -> (obs, reward, end)``.
-        command: ``(A, P, C, mix, unmix, box, frac) -> (u, u_cmd, ok)``.
+        step: ``(X, A, refs, P, C, rng, gust, bias, mix, unmix, box, frac, obsbox, xbox,
+            active, obs, reward, end, u, u_cmd, work) -> ok`` (outputs written in place).
+        finish: ``(X, refs, C, rng, bias, obsbox, xbox, obs, reward, end) -> True``.
+        command: ``(A, P, C, mix, unmix, box, frac, u, u_cmd, work) -> ok``.
+        module: The generated module (its file lies in the kernel cache folder).
     """
 
-    vid: int
     step: Callable[..., Any]
     finish: Callable[..., Any]
-    command: Callable[..., Any] = command_batch
+    command: Callable[..., Any]
+    module: types.ModuleType
 
 
-def vehicle_kernels(name: str) -> Kernels:
-    """The kernels of a registered vehicle (``planar``, ``quad6dof``)."""
-    return Kernels(VEHICLE_IDS[name], _step, _finish)
+def cache_dir() -> Path:
+    """Folder of the generated kernel modules and numba's cache of them.
 
-
-def _rebind(func: Any, **names: Any) -> Any:
-    """A numba dispatcher's source compiled again with some global names bound elsewhere."""
-    py = func.py_func
-    glob = {**py.__globals__, **names}
-    clone = types.FunctionType(py.__code__, glob, py.__name__, py.__defaults__, py.__closure__)
-    return numba.njit(clone)
-
-
-_POINT_CACHE: dict[Any, Kernels] = {}
-
-
-def point_rhs_kernels(name: str, point: Any) -> Kernels:
-    """Kernels stepping a compiled ``point(x, u, out)`` vector field instead of the vehicle's.
-
-    The same kernel source with ``_field`` bound to the point rhs (no effects act on it);
-    compiled once per point function and process (not cached on disk).
+    ``$QUAD_SINDY_CACHE`` if set, else ``$XDG_CACHE_HOME/quad-sindy`` (``~/.cache/quad-sindy``).
     """
-    key = (name, id(point))
-    if key not in _POINT_CACHE:
+    env = os.environ.get("QUAD_SINDY_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "quad-sindy"
 
-        @numba.njit
-        def field(vid, x, u, thrust, wind, p, c, out):  # noqa: ANN001, ANN202
-            point(x, u, out)
 
-        integrate = _rebind(_integrate_one, _field=field)
-        step = _rebind(_step, _integrate_one=integrate)
-        _POINT_CACHE[key] = Kernels(VEHICLE_IDS[name], step, _finish)
-    return _POINT_CACHE[key]
+_TEMPLATE = Path(__file__).with_name("kernel_template.py")
+_DEPENDS = (Path(__file__), Path(dynamics.__file__), _TEMPLATE)
+_BUILT: dict[str, Kernels] = {}
+
+
+def _ref(func: Any) -> tuple[str, str]:
+    """(module, name) of a module-level numba function, checked to be importable."""
+    py = getattr(func, "py_func", func)
+    module, name = py.__module__, py.__qualname__
+    if "." in name or getattr(importlib.import_module(module), name, None) is not func:
+        raise ValueError(f"{name} must be a module-level function of {module} to build kernels")
+    return module, name
+
+
+def _write_module(stem: str, text: str) -> Path:
+    """Writes ``text`` as ``stem.py`` in the cache folder (atomically, umask permissions)."""
+    folder = cache_dir()
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{stem}.py"
+    if path.exists() and path.read_text() == text:
+        return path
+    tmp = folder / f".{stem}.{os.getpid()}.{uuid.uuid4().hex}.tmp"
+    tmp.write_text(text)
+    os.replace(tmp, path)
+    return path
+
+
+def build_kernels(footer: str, depends: tuple[Any, ...] = (), label: str = "kernels") -> Kernels:
+    """Kernels whose ``_field`` and ``_observe`` are bound by the source ``footer``.
+
+    The module (the kernel template, then ``footer``) is written to :func:`cache_dir`, named
+    by a hash of its text and of the sources it inlines (this module, the dynamics, the
+    modules in ``depends``), and imported, so numba's ``cache=True`` compiles it once per
+    machine rather than once per process, and a changed source gets a fresh module.
+    """
+    text = (
+        f"# Generated by quad_envs.physics.build_kernels ({label}); do not edit.\n"
+        + _TEMPLATE.read_text()
+        + "\n\n# -- the vector field and observation of these kernels --\n"
+        + footer
+    )
+    digest = hashlib.sha256(text.encode())
+    for source in (*_DEPENDS, *depends):
+        digest.update(Path(source).read_bytes())
+    stem = f"quad_sindy_{label}_{digest.hexdigest()[:16]}"
+    if stem in _BUILT:
+        return _BUILT[stem]
+    module = sys.modules.get(stem)
+    if module is None:
+        path = _write_module(stem, text)
+        spec = importlib.util.spec_from_file_location(stem, path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[stem] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[stem]
+            raise
+    kernels = Kernels(module.step, module.finish, command_batch, module)
+    _BUILT[stem] = kernels
+    return kernels
+
+
+def vehicle_kernels(vehicle: Any) -> Kernels:
+    """The kernels of a vehicle record (its ``point_field`` and ``point_observe``)."""
+    field_mod, field_name = _ref(vehicle.point_field)
+    obs_mod, obs_name = _ref(vehicle.point_observe)
+    footer = (
+        f"from {field_mod} import {field_name} as _field  # noqa: E402\n"
+        f"from {obs_mod} import {obs_name} as _observe  # noqa: E402\n"
+    )
+    depends = {sys.modules[field_mod].__file__, sys.modules[obs_mod].__file__}
+    return build_kernels(footer, tuple(sorted(depends)), vehicle.name)
+
+
+def point_rhs_kernels(vehicle: Any, point_source: str) -> Kernels:
+    """Kernels stepping a generated ``point(X, U, out)`` vector field (a surrogate's).
+
+    ``point_source`` is the Python source of ``point`` (scalar code using ``math``); no
+    physical effects act on it (rotor limits and sensor effects do).
+    """
+    obs_mod, obs_name = _ref(vehicle.point_observe)
+    footer = (
+        '\n@numba.njit(cache=True, inline="always")\n'
+        + point_source
+        + '\n\n@numba.njit(cache=True, inline="always")\n'
+        "def _field(x, u, thrust, wind, p, c, out):\n"
+        "    point(x, u, out)\n\n\n"
+        f"from {obs_mod} import {obs_name} as _observe  # noqa: E402\n"
+    )
+    kernels = build_kernels(footer, (sys.modules[obs_mod].__file__,), f"{vehicle.name}_model")
+    # The observation kernel does not involve the field: share the vehicle's (compiled once).
+    return dataclasses.replace(kernels, finish=vehicle_kernels(vehicle).finish)
+
+
+def warm_up(kernels: Kernels, n_ext: int, n_actions: int, n_obs: int, n_wind: int,
+            mix: FloatArray) -> None:  # fmt: skip
+    """Compiles (or loads from numba's cache) a kernel set's entry points, stepping nobody.
+
+    Raises whatever numba raises if the kernels do not compile.
+    """
+    m, k = np.shape(mix)
+    f = np.float64
+    X, A, refs = np.zeros((0, n_ext)), np.zeros((0, n_actions)), np.zeros((0, 16))
+    P, C = np.zeros((1, len(PARAM_FIELDS))), np.zeros(N_CONSTS)
+    rng, gust, bias = np.zeros(0, np.uint64), np.zeros((0, n_wind)), np.zeros((0, n_obs))
+    box, frac, obsbox, xbox = np.zeros((2, n_actions)), np.ones(k), np.zeros((3, n_obs)), None
+    xbox = np.zeros((2, n_ext))
+    obs, reward, end = np.zeros((0, n_obs)), np.zeros(0, f), np.zeros(0, bool)
+    u, u_cmd, work = np.zeros((0, m)), np.zeros((0, m)), np.zeros((8, 16))
+    mix = np.ascontiguousarray(mix, dtype=f)
+    kernels.step(X, A, refs, P, C, rng, gust, bias, mix, mix, box, frac, obsbox, xbox,
+                 np.zeros(0, bool), obs, reward, end, u, u_cmd, work)  # fmt: skip
+    kernels.finish(X, refs, C, rng, bias, obsbox, xbox, obs, reward, end)
 
 
 def new_seed(rng: np.random.Generator) -> np.uint64:

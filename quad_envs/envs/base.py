@@ -200,8 +200,9 @@ class _EnvCore:
         )  # fmt: skip
         self._P0 = physics.pack_params(params)[None, :]
         self._delay = int(effects.obs_delay_steps)
-        self._python_field = rhs is not None and not hasattr(rhs, "point")
+        self._python_field = rhs is not None and getattr(rhs, "point_source", None) is None
         self._kernels = _kernels_of(self)
+        self._work_array = self._work(1)
         self._n_table = int(round(self.duration / self.dt)) + 1
         self._t_table = np.arange(self._n_table) * self.dt
 
@@ -328,6 +329,11 @@ class _EnvCore:
             action = np.clip(phys, self._u_low, self._u_high)
         return action.astype(self._single_act_space.dtype)
 
+    def _work(self, b: int) -> FloatArray:
+        """Scratch array of the kernels (see ``kernel_template.step``)."""
+        width = max(self._n_ext, self._k, self.vehicle.ndim, self._u_low.size)
+        return np.empty((8, width))
+
     def _advance(
         self, X: FloatArray, A: FloatArray, refs: FloatArray, P: FloatArray, rng: Any,
         gust: FloatArray, bias: FloatArray, active: FloatArray, rhs: Rhs,
@@ -336,24 +342,45 @@ class _EnvCore:
         kern = self._kernels
         if A.dtype != np.float64 or not A.flags.c_contiguous:
             A = np.ascontiguousarray(A, dtype=np.float64)
+        b = X.shape[0]
+        obs = np.empty((b, self._obsbox.shape[1]))
+        reward, end = np.empty(b), np.empty(b, dtype=bool)
+        u, u_cmd = np.zeros((b, self._m)), np.zeros((b, self._m))
         if not self._python_field:
-            obs, reward, end, u, u_cmd, ok = kern.step(
-                kern.vid, X, A, refs, P, self._consts, rng, gust, bias, self._mix, self._unmix,
-                self._box, self._frac, self._obsbox, self._xbox, active,
+            ok = kern.step(
+                X, A, refs, P, self._consts, rng, gust, bias, self._mix, self._unmix,
+                self._box, self._frac, self._obsbox, self._xbox, active, obs, reward, end,
+                u, u_cmd, self._work_array,
             )  # fmt: skip
         else:
-            u, u_cmd, ok = kern.command(
-                A, P, self._consts, self._mix, self._unmix, self._box, self._frac
-            )
+            ok = kern.command(
+                A, P, self._consts, self._mix, self._unmix, self._box, self._frac, u, u_cmd,
+                self._work_array,
+            )  # fmt: skip
             if ok:
+                if not active.all():
+                    u[~active] = 0.0
+                    u_cmd[~active] = 0.0
                 moved = rk4_step(rhs, X[active], u[active], self.dt, self.substeps)
                 X[active] = moved
-                obs, reward, end = kern.finish(
-                    kern.vid, X, refs, self._consts, rng, bias, self._obsbox, self._xbox
+                kern.finish(
+                    X, refs, self._consts, rng, bias, self._obsbox, self._xbox, obs, reward, end
                 )
         if not ok:
             raise ValueError(f"action must be finite (no NaN or inf), got {A!r}")
         return obs, reward, end, u, u_cmd
+
+    def _observe_all(
+        self, X: FloatArray, refs: FloatArray, rng: Any, bias: FloatArray
+    ) -> FloatArray:
+        """Observations of the members (no step), e.g. at reset."""
+        b = X.shape[0]
+        obs = np.empty((b, self._obsbox.shape[1]))
+        reward, end = np.empty(b), np.empty(b, dtype=bool)
+        self._kernels.finish(
+            X, refs, self._consts, rng, bias, self._obsbox, self._xbox, obs, reward, end
+        )
+        return obs
 
 
 class QuadrotorEnv(_EnvCore, gym.Env):
@@ -433,12 +460,7 @@ class QuadrotorEnv(_EnvCore, gym.Env):
         self._bias = episode.bias[None, :]
         self._was_reset = True
         self._trail = [self._X[0, : self._n].copy()]
-        kern = self._kernels
-        obs, _, _ = kern.finish(
-            kern.vid, self._X, self._refs[:1], self._consts, self._rng, self._bias,
-            self._obsbox, self._xbox,
-        )  # fmt: skip
-        obs = obs[0]
+        obs = self._observe_all(self._X, self._refs[:1], self._rng, self._bias)[0]
         if self._delay:
             self._history = deque([obs] * (self._delay + 1), maxlen=self._delay + 1)
             obs = self._history[0].copy()
@@ -517,9 +539,9 @@ class QuadrotorEnv(_EnvCore, gym.Env):
 def _kernels_of(env: _EnvCore) -> physics.Kernels:
     """The compiled kernels of an env's vector field."""
     rhs = env._custom_rhs
-    if rhs is not None and hasattr(rhs, "point"):
-        return physics.point_rhs_kernels(env.vehicle.name, rhs.point)
-    return physics.vehicle_kernels(env.vehicle.name)
+    if rhs is not None and getattr(rhs, "point_source", None) is not None:
+        return physics.point_rhs_kernels(env.vehicle, rhs.point_source)
+    return physics.vehicle_kernels(env.vehicle)
 
 
 class QuadrotorVectorEnv(_EnvCore, VectorEnv):
@@ -589,11 +611,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self._refresh_episode_tables()
         self._needs_reset[:] = False
         self._was_reset = True
-        kern = self._kernels
-        obs, _, _ = kern.finish(
-            kern.vid, self._states, self._references(), self._consts, self._rng_state,
-            self._bias, self._obsbox, self._xbox,
-        )  # fmt: skip
+        obs = self._observe_all(self._states, self._references(), self._rng_state, self._bias)
         if self._delay:
             self._history = np.repeat(obs[:, None, :], self._delay + 1, axis=1)
             obs = self._history[:, 0].copy()

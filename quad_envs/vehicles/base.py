@@ -64,6 +64,12 @@ class Vehicle:
             (names in the grammar of :mod:`identification.features`).
         rotor_points: ``(state, params) -> (k, ndim)`` rotor positions for drawing.
         views: Projections the renderer draws.
+        point_field: Module-level numba function ``(x, u, thrust, wind, p, c, out)`` writing
+            the extended dx/dt of one state (rigid body from :mod:`quad_envs.dynamics`,
+            plus the effects of :mod:`quad_envs.physics`); the step kernels are built from
+            it (:func:`quad_envs.physics.vehicle_kernels`).
+        point_observe: Module-level numba function ``(x, ref, out)`` writing ``observe``
+            of one state (tests check that the two agree).
     """
 
     name: str
@@ -89,6 +95,8 @@ class Vehicle:
     library: Callable[[], list[str]]
     rotor_points: Callable[[FloatArray, Any], FloatArray]
     views: tuple[View, ...]
+    point_field: Callable[..., None] | None = None
+    point_observe: Callable[..., None] | None = None
 
     def rhs(self, x: FloatArray, u: FloatArray) -> FloatArray:
         """dx/dt with this vehicle's parameters (no saturation)."""

@@ -2,11 +2,26 @@
 
 from __future__ import annotations
 
+from typing import Any
+
+import numba
 import numpy as np
 
 from quad_envs import dynamics, physics
 from quad_envs.controllers import PlanarPD
 from quad_envs.params import PAPER_PLANAR, PlanarQuadParams
+from quad_envs.physics import (
+    C_DRAG,
+    C_ROTOR,
+    P_DRAG_LINEAR_XY,
+    P_DRAG_LINEAR_Z,
+    P_DRAG_QUADRATIC_XY,
+    P_DRAG_QUADRATIC_Z,
+    P_GRAVITY,
+    P_I1,
+    P_MASS,
+    P_TAU,
+)
 from quad_envs.tasks import COST_WEIGHTS as W
 from quad_envs.tasks import FlightVolume
 from quad_envs.trajectories import PLANAR_REF_NAMES
@@ -26,6 +41,53 @@ def planar_observe(states: FloatArray, refs: FloatArray) -> FloatArray:
     return np.concatenate(
         (states, refs[..., 0:2] - states[..., 0:2], refs[..., 2:4] - states[..., 3:5]), axis=-1
     )
+
+
+_field = numba.njit(cache=True, inline="always")(dynamics.planar_field)
+_drag = numba.njit(cache=True, inline="always")(dynamics.planar_drag)
+
+
+@numba.njit(cache=True, inline="always")
+def planar_point(x: Any, u: Any, thrust: Any, wind: Any, p: Any, c: Any, out: Any) -> None:
+    """Extended planar field at one point for the kernels: rigid body (+ drag, wind, rotor lag).
+
+    The equations are :func:`quad_envs.dynamics.planar_field` and
+    :func:`quad_envs.dynamics.planar_drag`, compiled; the effects are described in
+    :mod:`quad_envs.physics`.
+
+    Args:
+        x: Extended state (6, or 8 with rotor thrusts).
+        u: Collective input [u1, u2] (from the rotor thrusts in effect).
+        thrust: Commanded rotor thrusts (2,).
+        wind: Inertial wind (2,).
+        p: Parameter vector (:data:`quad_envs.physics.PARAM_FIELDS`).
+        c: Constants vector (:func:`quad_envs.physics.pack_consts`).
+        out: dx/dt (written).
+    """
+    d = _field(x[2], x[3], x[4], x[5], u[0], u[1], p[P_MASS], p[P_I1], p[P_GRAVITY])
+    for j in range(6):
+        out[j] = d[j]
+    if c[C_DRAG] != 0.0:
+        fy, fz = _drag(
+            x[2], x[3] - wind[0], x[4] - wind[1], p[P_DRAG_LINEAR_XY], p[P_DRAG_LINEAR_Z],
+            p[P_DRAG_QUADRATIC_XY], p[P_DRAG_QUADRATIC_Z],
+        )  # fmt: skip
+        out[3] += fy / p[P_MASS]
+        out[4] += fz / p[P_MASS]
+    if c[C_ROTOR] != 0.0:
+        for j in range(2):
+            out[6 + j] = (thrust[j] - x[6 + j]) / p[P_TAU]
+
+
+@numba.njit(cache=True, inline="always")
+def planar_observe_point(x: Any, ref: Any, out: Any) -> None:
+    """:func:`planar_observe` of one state for the kernels (10 entries written)."""
+    for j in range(6):
+        out[j] = x[j]
+    out[6] = ref[0] - x[0]
+    out[7] = ref[1] - x[1]
+    out[8] = ref[2] - x[3]
+    out[9] = ref[3] - x[4]
 
 
 def planar_state_bounds(volume: FlightVolume) -> tuple[FloatArray, FloatArray]:
@@ -95,5 +157,7 @@ PLANAR = Vehicle(
     library=planar_library,
     rotor_points=planar_rotor_points,
     views=(View((0, 1), ("y [m]", "z [m]")),),
+    point_field=planar_point,
+    point_observe=planar_observe_point,
 )
 """The paper's planar vehicle (authors' ``get_quad_params.m``)."""

@@ -3,12 +3,29 @@
 from __future__ import annotations
 
 import itertools
+import math
+from typing import Any
 
+import numba
 import numpy as np
 
 from quad_envs import dynamics, physics
 from quad_envs.controllers import Quad6DOFPD
 from quad_envs.params import PAPER_6DOF, Quad6DOFParams
+from quad_envs.physics import (
+    C_DRAG,
+    C_ROTOR,
+    P_DRAG_LINEAR_XY,
+    P_DRAG_LINEAR_Z,
+    P_DRAG_QUADRATIC_XY,
+    P_DRAG_QUADRATIC_Z,
+    P_GRAVITY,
+    P_I1,
+    P_I2,
+    P_I3,
+    P_MASS,
+    P_TAU,
+)
 from quad_envs.tasks import COST_WEIGHTS as W
 from quad_envs.tasks import FlightVolume
 from quad_envs.trajectories import SPATIAL_REF_NAMES
@@ -42,6 +59,67 @@ def quad6dof_observe(states: FloatArray, refs: FloatArray) -> FloatArray:
         ),
         axis=-1,
     )
+
+
+_field = numba.njit(cache=True, inline="always")(dynamics.quad6dof_field)
+_rotation = numba.njit(cache=True, inline="always")(dynamics.rotation_entries)
+_body_drag = numba.njit(cache=True, inline="always")(dynamics.body_drag)
+
+
+@numba.njit(cache=True, inline="always")
+def _wrap_one(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@numba.njit(cache=True, inline="always")
+def quad6dof_point(x: Any, u: Any, thrust: Any, wind: Any, p: Any, c: Any, out: Any) -> None:
+    """Extended 6-DOF field at one point for the kernels (see ``planar_point``; wind (3,)).
+
+    The equations are :func:`quad_envs.dynamics.quad6dof_field` and
+    :func:`quad_envs.dynamics.body_drag`, compiled.
+    """
+    d = _field(
+        x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10], x[11], u[0], u[1], u[2], u[3],
+        p[P_MASS], p[P_I1], p[P_I2], p[P_I3], p[P_GRAVITY],
+    )  # fmt: skip
+    for j in range(12):
+        out[j] = d[j]
+    if c[C_DRAG] != 0.0:
+        r = _rotation(
+            math.cos(x[3]), math.sin(x[3]), math.cos(x[4]), math.sin(x[4]),
+            math.cos(x[5]), math.sin(x[5]),
+        )  # fmt: skip
+        # Body-frame air velocity v_B - R^T w.
+        wx = r[0] * wind[0] + r[3] * wind[1] + r[6] * wind[2]
+        wy = r[1] * wind[0] + r[4] * wind[1] + r[7] * wind[2]
+        wz = r[2] * wind[0] + r[5] * wind[1] + r[8] * wind[2]
+        fx, fy, fz = _body_drag(
+            x[6] - wx, x[7] - wy, x[8] - wz, p[P_DRAG_LINEAR_XY], p[P_DRAG_LINEAR_Z],
+            p[P_DRAG_QUADRATIC_XY], p[P_DRAG_QUADRATIC_Z],
+        )  # fmt: skip
+        out[6] += fx / p[P_MASS]
+        out[7] += fy / p[P_MASS]
+        out[8] += fz / p[P_MASS]
+    if c[C_ROTOR] != 0.0:
+        for j in range(4):
+            out[12 + j] = (thrust[j] - x[12 + j]) / p[P_TAU]
+
+
+@numba.njit(cache=True, inline="always")
+def quad6dof_observe_point(x: Any, ref: Any, out: Any) -> None:
+    """:func:`quad6dof_observe` of one state for the kernels (19 entries written)."""
+    for j in range(12):
+        out[j] = x[j]
+    out[5] = _wrap_one(x[5])
+    r = _rotation(
+        math.cos(x[3]), math.sin(x[3]), math.cos(x[4]), math.sin(x[4]),
+        math.cos(x[5]), math.sin(x[5]),
+    )  # fmt: skip
+    for j in range(3):
+        out[12 + j] = ref[j] - x[j]
+        v = r[3 * j] * x[6] + r[3 * j + 1] * x[7] + r[3 * j + 2] * x[8]
+        out[15 + j] = ref[3 + j] - v
+    out[18] = _wrap_one(ref[9] - x[5])
 
 
 def quad6dof_state_bounds(volume: FlightVolume) -> tuple[FloatArray, FloatArray]:
@@ -151,5 +229,7 @@ QUAD6DOF = Vehicle(
     library=quad6dof_library,
     rotor_points=quad6dof_rotor_points,
     views=(View((1, 2), ("y [m]", "z [m]")), View((0, 1), ("x [m]", "y [m]"))),
+    point_field=quad6dof_point,
+    point_observe=quad6dof_observe_point,
 )
 """The paper's vehicle in 6-DOF, J = diag(2.5e-4, 2.32e-4, 3.738e-4) kg m^2."""
