@@ -619,3 +619,24 @@ def prune(model: RotorcraftModel, trajs: Sequence[Trajectory], fraction: float) 
     out = RotorcraftModel(np.where(keep, model.coefficients, 0.0), model.tau, model.dt)
     out.meta = dict(model.meta, pruned_fraction=fraction)
     return out
+
+
+def prune_to(
+    model: RotorcraftModel, trajs: Sequence[Trajectory], max_terms: int
+) -> RotorcraftModel:
+    """Keeps the ``max_terms`` terms with the largest contribution relative to their equation's.
+
+    Ranks every term by its RMS contribution divided by the largest in its equation (the
+    measure of :func:`prune`) and zeroes all but the top ``max_terms``.
+    """
+    if max_terms < 1:
+        raise ValueError(f"max_terms must be >= 1, got {max_terms}")
+    contrib = contributions(model, trajs)
+    relative = contrib / np.maximum(contrib.max(axis=1, keepdims=True), 1e-300)
+    relative[model.coefficients == 0] = -1.0
+    keep = np.zeros(relative.size, dtype=bool)
+    keep[np.argsort(relative, axis=None)[::-1][:max_terms]] = True
+    keep = keep.reshape(relative.shape) & (model.coefficients != 0)
+    out = RotorcraftModel(np.where(keep, model.coefficients, 0.0), model.tau, model.dt)
+    out.meta = dict(model.meta, pruned_to=max_terms)
+    return out

@@ -307,6 +307,25 @@ def test_identification_recovers_a_known_model_from_synthetic_flights():
     assert "W" in " ".join(refined.equations())
 
 
+def test_prune_to_keeps_the_largest_terms():
+    from identification.rotorcraft import FEATURE_NAMES, nominal_model, prune, prune_to
+
+    model = nominal_model()
+    xi = model.coefficients.copy()
+    xi[2, FEATURE_NAMES.index("S w")] = -1e-9  # negligible rotor drag
+    xi[0, FEATURE_NAMES.index("u")] = -0.3  # noticeable body drag
+    model = type(model)(xi)
+    flights = _hover_flights(model, 1, 0.5, seed=7)
+    capped = prune_to(model, flights, model.n_terms - 1)
+    assert capped.n_terms == model.n_terms - 1
+    assert capped.coefficients[2, FEATURE_NAMES.index("S w")] == 0.0
+    kept = capped.coefficients != 0
+    np.testing.assert_array_equal(capped.coefficients[kept], model.coefficients[kept])
+    assert prune(model, flights, 1e-3).coefficients[2, FEATURE_NAMES.index("S w")] == 0.0
+    with pytest.raises(ValueError, match="max_terms"):
+        prune_to(model, flights, 0)
+
+
 def test_rotorcraft_model_save_load_and_bad_input(tmp_path):
     from identification.rotorcraft import RotorcraftModel, load_rotorcraft, nominal_model
 

@@ -47,6 +47,7 @@ from identification.rotorcraft import (
     group_errors,
     make_windows,
     prune,
+    prune_to,
     refine,
     rotation_zxy_torch,
 )
@@ -258,7 +259,9 @@ def identify(
     Stage 1, for every actuator time constant in ``taus``: equation-error STLSQ, then
     ``iterations // 2`` refinement steps on ``horizon``-step windows (every ``stride``-th
     sample). Stage 2, for the best tau: prune at each of ``prune_fractions`` and refine for
-    ``iterations`` steps. The score is the mean over
+    ``iterations`` steps; if the gentlest pruning leaves more than ``max_terms`` terms, the
+    ``max_terms`` largest terms (:func:`~identification.rotorcraft.prune_to`) are a further
+    candidate. The score is the mean over
     groups of SimErr / hold SimErr on the validation flights; among candidates with at most
     ``max_terms`` terms (else the sparsest) the lowest score wins.
 
@@ -300,6 +303,13 @@ def identify(
         pruned = fit_refine(pruned, iterations)
         pruned.meta["pruned_fraction"] = frac
         candidates.append((score(pruned, f"pruned {frac:g}"), pruned))
+    gentlest = candidates[1] if len(candidates) > 1 else candidates[0]
+    if gentlest[1].n_terms > max_terms:
+        # The gentlest pruning left too many terms: also try the best max_terms terms.
+        capped = prune_to(best, train, max_terms)
+        prog.say(f"tau {best.tau * 1e3:.0f} ms: the {capped.n_terms} largest terms")
+        capped = fit_refine(capped, iterations)
+        candidates.append((score(capped, f"largest {max_terms}"), capped))
     eligible = [c for c in candidates if c[1].n_terms <= max_terms]
     if eligible:
         chosen = min(eligible, key=lambda pair: pair[0])[1]
