@@ -64,7 +64,7 @@ def test_abs_and_norm_compile_in_numpy_and_torch(xp: object) -> None:
 def test_model_with_norm_terms_round_trips() -> None:
     names = ["y_dot", "y_dot norm(y_dot z_dot)"]
     coef = np.array([[-0.5, -0.25], [0.0, 0.0]])
-    model = IdentifiedModel(("y_dot", "z_dot"), ("u1",), tuple(names), coef)
+    model = IdentifiedModel(names, coef, ("y_dot", "z_dot"), ("u1",))
     again = IdentifiedModel.from_dict(model.to_dict())
     x, u = np.array([3.0, 4.0]), np.array([0.0])
     np.testing.assert_allclose(again.rhs(x, u), [-0.5 * 3 - 0.25 * 3 * 5, 0.0])
@@ -78,7 +78,7 @@ def test_model_with_norm_terms_round_trips() -> None:
 
 def test_drag_terms_and_spec() -> None:
     body = drag_terms(["u", "v", "w"])
-    assert body == ["u", "v", "w", "norm(u v w) u", "norm(u v w) v", "norm(u v w) w"]
+    assert body == ["u", "v", "w", "u norm(u v w)", "norm(u v w) v", "norm(u v w) w"]
     assert drag_terms(["v"]) == ["v", "abs(v) v"]
     planar = drag_terms(["y_dot", "z_dot"], "phi")
     assert len(planar) == 12 and "sin(2 phi) norm(y_dot z_dot) z_dot" in planar
