@@ -35,6 +35,7 @@ one-line ValueError that names the terms and the data that would fix it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -44,13 +45,15 @@ import pysindy as ps
 from pysindy.differentiation import BaseDifferentiation
 from pysindy.optimizers import BaseOptimizer
 from sklearn.base import clone
+from threadpoolctl import threadpool_limits
 
 from identification.data import Trajectory
 from identification.features import compile_features, compile_rhs, parse_term, term_name
 from identification.model import IdentifiedModel
+from identification.stepwise import simpler_twins, stepwise_coefficients
 
 DERIVATIVES = ("rk4", "forward", "central", "smoothed")
-OPTIMIZERS = ("sr3", "stlsq", "ensemble")
+OPTIMIZERS = ("sr3", "stlsq", "ensemble", "stepwise")
 DEFAULT_LAMBDAS = tuple(np.round(np.concatenate([[0.0], np.logspace(-6, 0, 25)]), 12))
 """Default scan grid for our scaled threshold (0 and 25 log-spaced values from 1e-6 to 1)."""
 
@@ -60,6 +63,22 @@ below which its columns are exactly collinear on the data (float64 round-off lev
 
 CHUNK_ELEMENTS = 4_000_000
 """Rows x features per chunk when building the normal equations (about 32 MB a stage)."""
+
+
+def serial_blas(func: Callable) -> Callable:
+    """Runs ``func`` with one BLAS thread.
+
+    The factors here are small (p up to a few hundred columns, chunks of rows). On a busy
+    machine a threaded BLAS spins its threads on them: a 1000 x 30 QR took 0.3 s with two
+    OpenBLAS threads and 0.4 ms with one.
+    """
+
+    @functools.wraps(func)
+    def wrapper(*args: object, **kwargs: object) -> object:
+        with threadpool_limits(limits=1, user_api="blas"):
+            return func(*args, **kwargs)
+
+    return wrapper
 
 
 @dataclass(frozen=True)
@@ -288,6 +307,7 @@ def regression_rows(
     return np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts])
 
 
+@serial_blas
 def grams(
     trajs: Sequence[Trajectory],
     feature_names: Sequence[str],
@@ -419,7 +439,7 @@ def _scales(gram: Gram, scale: bool) -> tuple[np.ndarray, np.ndarray]:
     return col, row
 
 
-def solve(gram: Gram, config: FitConfig) -> np.ndarray:
+def solve(gram: Gram, config: FitConfig, feature_names: Sequence[str] | None = None) -> np.ndarray:
     """Scaled sparse regression on the triangular factor with a pysindy optimizer, debiased.
 
     The optimizer sees ``A = R`` and ``B = Q^T Y`` (p rows), whose least-squares objective
@@ -428,6 +448,8 @@ def solve(gram: Gram, config: FitConfig) -> np.ndarray:
     Returns:
         Coefficients, shape (n_targets, n_features), in the units of Theta and Y.
     """
+    if config.optimizer == "stepwise" and config.lam > 0:
+        return solve_lambdas(gram, config, [config.lam], feature_names)[0]
     col, row = _scales(gram, config.scale)
     a = gram.r / col[None, :]
     b = gram.z / row[None, :]
@@ -441,6 +463,33 @@ def solve(gram: Gram, config: FitConfig) -> np.ndarray:
         TALLY.add(caught)
         coef_s = _debias(a, b, np.atleast_2d(opt.coef_) != 0)
     return coef_s * row[:, None] / col[None, :]
+
+
+def solve_lambdas(
+    gram: Gram,
+    config: FitConfig,
+    lams: Sequence[float],
+    feature_names: Sequence[str] | None = None,
+) -> np.ndarray:
+    """:func:`solve` at every threshold of ``lams``, shape (len(lams), n_targets, n_features).
+
+    The ``stepwise`` optimizer computes its path once per target and reads every threshold
+    off it; the others are solved threshold by threshold. With ``feature_names`` the stepwise
+    path enters the simpler of two near-collinear terms that the data cannot tell apart
+    (see :func:`identification.stepwise.stepwise_path`).
+    """
+    if config.optimizer != "stepwise":
+        return np.array([solve(gram, dataclasses.replace(config, lam=float(v))) for v in lams])
+    col, row = _scales(gram, config.scale)
+    a = gram.r / col[None, :]
+    b = gram.z / row[None, :]
+    twins = simpler_twins(a, feature_names) if feature_names is not None else None
+    rows = max(gram.rows, 1)
+    coef_s = stepwise_coefficients(a, b, rows, lams, simpler=twins, n_eff=rows / config.window)
+    for li, lam in enumerate(lams):
+        if lam == 0:
+            coef_s[li] = np.linalg.lstsq(a, b, rcond=None)[0].T
+    return coef_s * row[None, :, None] / col[None, None, :]
 
 
 def _debias(a: np.ndarray, b: np.ndarray, support: np.ndarray) -> np.ndarray:
@@ -494,6 +543,7 @@ def _check_dataset(trajs: Sequence[Trajectory]) -> None:
             raise ValueError("all trajectories must have the same state and input names")
 
 
+@serial_blas
 def fit_coefficients(
     trajs: Sequence[Trajectory], feature_names: Sequence[str], config: FitConfig
 ) -> np.ndarray:
@@ -508,7 +558,8 @@ def fit_coefficients(
             return sparse_regression(
                 *regression_rows(trajs, names, derivative, config.window, xi), config
             )
-        return solve(Gram.stack(grams(trajs, names, derivative, config.window, xi)), config)
+        return solve(Gram.stack(grams(trajs, names, derivative, config.window, xi)), config,
+                     names)  # fmt: skip
 
     if config.derivative != "rk4":
         return one(config.derivative, None)
@@ -523,6 +574,7 @@ def fit_coefficients(
     return xi
 
 
+@serial_blas
 def fit(
     trajs: Sequence[Trajectory],
     feature_names: Sequence[str],

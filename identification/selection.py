@@ -52,7 +52,9 @@ from identification.fit import (
     check_identifiable,
     fit_coefficients,
     grams,
+    serial_blas,
     solve,
+    solve_lambdas,
 )
 from identification.model import IdentifiedModel, json_safe
 
@@ -326,6 +328,7 @@ def resolve_collinear(
 
 
 # -- the entry point --------------------------------------------------------------------
+@serial_blas
 def select_model(
     trajs: Sequence[Trajectory],
     library: Sequence[str],
@@ -397,18 +400,21 @@ def select_model(
         for f in range(k):
             train = Gram.stack([g for g, fo in zip(unit_grams, fold_of, strict=True) if fo != f])
             held = [u for u, fo in zip(units, fold_of, strict=True) if fo == f]
-            for li, lam in enumerate(lambdas):
-                cfg = dataclasses.replace(base, lam=float(lam), window=w)
+            try:
+                fold_xis = solve_lambdas(train, dataclasses.replace(base, window=w), lambdas, names)
+            except (np.linalg.LinAlgError, ValueError, FloatingPointError):
+                steps.update()
+                continue
+            for li, xi in enumerate(fold_xis):
                 try:
-                    xi = solve(train, cfg)
                     rhs = compile_rhs(names, xi, first.state_names, first.input_names)
                     scores[li, f] = prediction_score(rhs, held, scale, horizon)
                 except (np.linalg.LinAlgError, ValueError, FloatingPointError):
                     scores[li, f] = np.inf
             steps.update()
         full = Gram.stack(unit_grams)
-        for li, lam in enumerate(lambdas):
-            xi = solve(full, dataclasses.replace(base, lam=float(lam), window=w))
+        full_xis = solve_lambdas(full, dataclasses.replace(base, window=w), lambdas, names)
+        for li, (lam, xi) in enumerate(zip(lambdas, full_xis, strict=True)):
             candidates.append(Candidate(w, float(lam), int(np.count_nonzero(xi)),
                                         list(scores[li])))  # fmt: skip
         steps.update()
@@ -471,7 +477,7 @@ def _bootstrap(
     bags = []
     for _ in range(n_models):
         weights = rng.multinomial(len(blocks), np.full(len(blocks), 1.0 / len(blocks)))
-        bags.append(solve(Gram.stack(block_grams, list(weights.astype(float))), config))
+        bags.append(solve(Gram.stack(block_grams, list(weights.astype(float))), config, names))
     bags_a = np.array(bags)
     prob = np.mean(bags_a != 0, axis=0)
     std = bags_a.std(axis=0)

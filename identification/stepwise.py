@@ -1,0 +1,260 @@
+"""Greedy stepwise sparse regression on a triangular factor (forward selection, backward pruning).
+
+Each equation is fitted on its own, on the scaled factor ``(A, b)`` of the regression
+(:class:`identification.fit.Gram`: ``A = R / column RMS``, ``b = Q^T y / target RMS``), where
+the residual sum of squares of any subset of columns is cheap. The path starts empty and
+
+* **forward**: adds the column that lowers the residual sum of squares the most (orthogonal
+  least squares, as FROLS: the gain of column j is ``(a_j_perp . r)^2 / |a_j_perp|^2`` with
+  ``a_j_perp`` the part of a_j outside the span of the chosen columns and r the residual);
+  a column that lies in that span to round-off (``|a_j_perp|^2 < tol |a_j|^2``) is never
+  entered, so a cancelling pair of nearly equal columns cannot be built;
+* **backward**: after every addition, removes chosen columns whose removal costs less than
+  half the gain of that addition (FoBa, Zhang 2011), so an early choice that a later pair of
+  columns explains better is undone.
+
+The stopping rule is the same scaled threshold ``lam`` as thresholded least squares: the
+path stops when the next column would explain less than ``lam`` of the target's RMS (gain
+below ``lam^2 n``). For unit-RMS orthogonal columns this is exactly a threshold on the
+scaled coefficient, so ``lam`` means what it means for STLSQ; for near-collinear columns it
+asks what the column adds beyond the ones already chosen, which thresholding cannot. The
+whole path is computed once, so every threshold of a grid costs one read-off and one
+small least-squares refit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+COLLINEAR_TOL = 1e-10
+"""A column whose part outside the chosen span has squared norm below this fraction of its own
+is taken as lying in that span (never entered)."""
+
+F_CRITICAL = 10.83
+"""F(1, inf) quantile at p = 0.001: a simpler twin is entered unless the complex column gains
+more than this many residual variances over it."""
+
+BACKWARD_FRACTION = 0.5
+"""A chosen column is removed when that costs less than this fraction of the last gain (FoBa)."""
+
+
+def stepwise_path(
+    a: np.ndarray,
+    b: np.ndarray,
+    max_terms: int,
+    tol: float = COLLINEAR_TOL,
+    simpler: dict[int, list[int]] | None = None,
+    total: float | None = None,
+    n_eff: float | None = None,
+) -> list[tuple[tuple[int, ...], float]]:
+    """The forward-backward greedy path of one target.
+
+    Args:
+        a: Scaled regression matrix (rows x p); here the triangular factor.
+        b: Scaled target (rows).
+        max_terms: Largest support size on the path.
+        tol: Collinearity tolerance (see :data:`COLLINEAR_TOL`).
+        simpler: For each column, the near-collinear columns whose term is a factor of its
+            own (``1`` for ``cos(phi)``, ``u2`` for ``cos(phi) u2``). When the best column
+            has such a simpler twin whose gain is not significantly smaller (F-test at
+            p = 0.001 against the residual variance), the twin is entered instead.
+        total: Total sum of squares of the target over the data rows (default ``|b|^2``).
+        n_eff: Effective independent rows for the F-test (default: rows of ``a``).
+
+    Returns:
+        One entry per forward step: the support after that step (and its backward pruning),
+        and the gain (drop of the residual sum of squares) of the column it added.
+    """
+    p = a.shape[1]
+    norms2 = np.einsum("ij,ij->j", a, a)
+    usable = norms2 > 0
+    support: list[int] = []
+    basis = np.zeros((a.shape[0], 0))
+    perp = a.copy()  # columns with the chosen span projected out
+    resid = b.copy()
+    outside = (float(b @ b) if total is None else total) - float(b @ b)
+    n_rows = float(a.shape[0] if n_eff is None else n_eff)
+    path: list[tuple[tuple[int, ...], float]] = []
+    seen: set[tuple[int, ...]] = set()
+    for _ in range(4 * max_terms):  # forward steps, a few undone by backward ones
+        if len(support) >= min(max_terms, p):
+            break
+        perp2 = np.einsum("ij,ij->j", perp, perp)
+        ok = usable & (perp2 > tol * norms2)
+        ok[support] = False
+        if not ok.any():
+            break
+        gains = np.zeros(p)
+        gains[ok] = (perp[:, ok].T @ resid) ** 2 / perp2[ok]
+        j = int(np.argmax(gains))
+        gain = float(gains[j])
+        if gain <= 0:
+            break
+        twins = [k for k in (simpler or {}).get(j, ()) if ok[k]]
+        if twins:
+            rss_after = max(outside + float(resid @ resid) - gain, 0.0)
+            sigma2 = rss_after / max(n_rows - len(support) - 1, 1.0)
+            k = max(twins, key=lambda c: gains[c])
+            if gain - gains[k] <= F_CRITICAL * sigma2:
+                j, gain = k, float(gains[k])
+        support.append(j)
+        q = perp[:, j] / np.sqrt(perp2[j])
+        basis = np.column_stack([basis, q])
+        perp -= np.outer(q, q @ perp)
+        resid -= q * (q @ resid)
+        # backward: drop the cheapest chosen column while it costs < half this gain
+        pruned = False
+        while len(support) > 1:
+            sub = a[:, support]
+            gram_inv = np.linalg.pinv(sub.T @ sub)
+            coef = gram_inv @ (sub.T @ b)
+            loss = coef**2 / np.maximum(np.diag(gram_inv), 1e-300)
+            k = int(np.argmin(loss[:-1]))  # never the column just added
+            if loss[k] >= BACKWARD_FRACTION * gain:
+                break
+            support.pop(k)
+            pruned = True
+        if simpler:
+            pruned |= _swap_twins(a, b, support, simpler, outside, n_rows)
+        if pruned:
+            basis = np.linalg.qr(a[:, support])[0]
+            perp = a - basis @ (basis.T @ a)
+            resid = b - basis @ (basis.T @ b)
+        key = tuple(sorted(support))
+        path.append((key, gain))
+        if key in seen and pruned:
+            break  # cycling between supports: stop here
+        seen.add(key)
+    return path
+
+
+def _swap_twins(
+    a: np.ndarray,
+    b: np.ndarray,
+    support: list[int],
+    simpler: dict[int, list[int]],
+    outside: float,
+    n_rows: float,
+) -> bool:
+    """Swaps chosen columns for near-collinear twins in place; returns whether any changed.
+
+    A complex column gives way to its simpler twin unless it explains significantly more
+    (F-test, p = 0.001); a simple column gives way to a complex twin only when that explains
+    significantly more. Early in the path the residual variance still holds unexplained
+    signal, so a choice made then is checked again here with the current variance.
+    """
+    complex_of: dict[int, list[int]] = {}
+    for j, ks in simpler.items():
+        for k in ks:
+            complex_of.setdefault(k, []).append(j)
+
+    def rss(cols: list[int]) -> float:
+        coef = np.linalg.lstsq(a[:, cols], b, rcond=None)[0]
+        r = b - a[:, cols] @ coef
+        return outside + float(r @ r)
+
+    changed = False
+    for _ in range(2 * len(support)):
+        base = rss(support)
+        sigma2 = base / max(n_rows - len(support), 1.0)
+        swap = None
+        for pos, c in enumerate(support):
+            for t in simpler.get(c, []):
+                if (
+                    t not in support
+                    and rss([*support[:pos], t, *support[pos + 1 :]]) - base <= F_CRITICAL * sigma2
+                ):
+                    swap = (pos, t)
+                    break
+            if swap is None:
+                better = [
+                    (rss([*support[:pos], t, *support[pos + 1 :]]), t)
+                    for t in complex_of.get(c, [])
+                    if t not in support
+                ]
+                if better and base - min(better)[0] > F_CRITICAL * sigma2:
+                    swap = (pos, min(better)[1])
+            if swap is not None:
+                break
+        if swap is None:
+            break
+        support[swap[0]] = swap[1]
+        changed = True
+    return changed
+
+
+def support_at(path: Sequence[tuple[tuple[int, ...], float]], floor: float) -> tuple[int, ...]:
+    """The support where the path stops: before the first step gaining less than ``floor``."""
+    support: tuple[int, ...] = ()
+    for step_support, gain in path:
+        if gain < floor:
+            break
+        support = step_support
+    return support
+
+
+def stepwise_coefficients(
+    a: np.ndarray,
+    b: np.ndarray,
+    rows: int,
+    lams: Sequence[float],
+    max_terms: int | None = None,
+    simpler: dict[int, list[int]] | None = None,
+    n_eff: float | None = None,
+) -> np.ndarray:
+    """Scaled coefficients of every target at every threshold (one path per target).
+
+    Args:
+        a: Scaled regression matrix (the triangular factor over unit-RMS columns).
+        b: Scaled targets, one column per target (unit RMS over the data rows).
+        rows: Number of data rows (the gain floor is ``lam^2 rows``).
+        lams: Thresholds: fraction of the target RMS a column must explain to enter.
+        max_terms: Largest support per target (default: ``min(p, 64)``).
+        simpler: Simpler near-collinear twins of each column (see :func:`stepwise_path`).
+        n_eff: Effective independent rows for the twin F-test (default: ``rows``).
+
+    Returns:
+        Shape (len(lams), targets, p), least-squares refits on each support.
+    """
+    p = a.shape[1]
+    max_terms = min(p, 64) if max_terms is None else max_terms
+    out = np.zeros((len(lams), b.shape[1], p))
+    for i in range(b.shape[1]):
+        path = stepwise_path(a, b[:, i], max_terms, simpler=simpler, total=float(rows),
+                             n_eff=n_eff or rows)  # fmt: skip
+        refits: dict[tuple[int, ...], np.ndarray] = {}
+        for li, lam in enumerate(lams):
+            support = support_at(path, float(lam) ** 2 * rows) if lam > 0 else _last(path)
+            if not support:
+                continue
+            if support not in refits:
+                cols = list(support)
+                refits[support] = np.linalg.lstsq(a[:, cols], b[:, i], rcond=None)[0]
+            out[li, i, list(support)] = refits[support]
+    return out
+
+
+def _last(path: Sequence[tuple[tuple[int, ...], float]]) -> tuple[int, ...]:
+    return path[-1][0] if path else ()
+
+
+def simpler_twins(
+    a: np.ndarray, feature_names: Sequence[str], threshold: float = 0.999
+) -> dict[int, list[int]]:
+    """Each column's simpler near-collinear twins.
+
+    A twin is nearly parallel to the column on the data (|cos| > ``threshold``) and its term
+    is a proper factor of the column's term (``1`` of ``cos(phi)``, ``u2`` of ``u2 cos(phi)``).
+    """
+    from identification.features import parse_term
+
+    terms = [set(parse_term(n)) for n in feature_names]
+    unit = a / np.maximum(np.linalg.norm(a, axis=0), 1e-300)
+    cos = np.abs(unit.T @ unit)
+    out: dict[int, list[int]] = {}
+    for j, k in zip(*np.nonzero(cos > threshold), strict=True):
+        if terms[k] < terms[j]:
+            out.setdefault(int(j), []).append(int(k))
+    return out
