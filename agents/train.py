@@ -118,9 +118,9 @@ def train(
     from agents.policies import SB3Policy
 
     _positive(steps=steps, eval_every=eval_every, eval_episodes=eval_episodes)
+    kwargs = task_kwargs(task, **(env_kwargs or {}))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    kwargs = task_kwargs(task, **(env_kwargs or {}))
     env = gym.make(env_id, **kwargs)
     model = make_algo(algo, env, seed)
     curve: list[tuple[int, float, float]] = []

@@ -18,7 +18,11 @@ import typer
 from quad_envs.vehicles import VEHICLES
 from quad_sindy import __version__
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__)
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    help="Gymnasium quadrotor environments and SINDy identification from data alone.",
+)
 bench_app = typer.Typer(no_args_is_help=True, help="Speed benchmarks (numbers and ratios).")
 app.add_typer(bench_app, name="bench")
 
@@ -338,15 +342,16 @@ def train_cmd(
     seed: Annotated[int, typer.Option(help="seed")] = 0,
     eval_every: Annotated[int, typer.Option(help="evaluate every N steps")] = 10_000,
     model: Annotated[Path | None, typer.Option(help="model JSON for surrogate ids")] = None,
+    task: Annotated[str, typer.Option(help="hover | figure8 | random")] = "hover",
 ) -> None:
-    """Trains PPO or SAC on the hover task (progress bar, periodic evaluation, curve, model)."""
+    """Trains PPO or SAC on a task (progress bar, periodic evaluation, curve, model)."""
     from agents.train import train
 
     if steps < 1 or eval_every < 1:
         _fail(f"--steps and --eval-every must be positive, got {steps} and {eval_every}")
     _writable_folder(out)
     kwargs = {"model": str(model)} if model else {}
-    result = train(env, algo.value, steps, out, seed, eval_every, env_kwargs=kwargs)
+    result = train(env, algo.value, steps, out, seed, eval_every, env_kwargs=kwargs, task=task)
     typer.echo(
         f"final return {result['final_return']:.1f} +- {result['final_std']:.1f}; "
         f"saved {result['model']}"
@@ -362,15 +367,17 @@ def evaluate_cmd(
     ] = None,
     episodes: Annotated[int, typer.Option(help="episodes")] = 10,
     model: Annotated[Path | None, typer.Option(help="model JSON for surrogate ids")] = None,
+    task: Annotated[str, typer.Option(help="hover | figure8 | random")] = "hover",
 ) -> None:
-    """Mean return of a trained agent on the hover task (ground truth or a surrogate)."""
+    """Mean return of a trained agent on a task (ground truth or a surrogate)."""
     from agents.policies import SB3Policy
-    from agents.train import HOVER_TASK, evaluate, load_agent
+    from agents.tasks import task_kwargs
+    from agents.train import evaluate, load_agent
 
     if episodes < 1:
         _fail(f"--episodes must be positive, got {episodes}")
     loaded = load_agent(agent, algo.value if algo else None)
-    kwargs = {**HOVER_TASK, **({"model": str(model)} if model else {})}
+    kwargs = task_kwargs(task, **({"model": str(model)} if model else {}))
     mean, std = evaluate(SB3Policy(loaded), env, episodes, **kwargs)
     typer.echo(f"return {mean:.1f} +- {std:.1f} over {episodes} episodes")
 
