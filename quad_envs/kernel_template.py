@@ -32,10 +32,10 @@ from quad_envs.physics import (
     _SUBSTEPS,
     _WIND0,
     KERNEL_JIT,
+    _add_noise,
     _all_finite,
     _command_one,
     _mix_into,
-    _next_normal,
 )
 
 _field: Any  # bound by the generated module
@@ -97,15 +97,15 @@ def _finish_one(x, ref, c, rng, i, bias, obsbox, xbox, obs):
     for j in range(nobs):
         cost += obsbox[2, j] * obs[j] * obs[j]
     reward = 0.0 if out else math.exp(-cost)
-    noise = c[_NOISE]
     for j in range(nobs):
         v = obs[j]
         if not math.isfinite(v):  # only terminal states can have them
             v = 0.0 if math.isnan(v) else (1e308 if v > 0 else -1e308)
-        v += bias[j]
-        if noise > 0.0:
-            v += noise * _next_normal(rng, i)
-        obs[j] = min(max(v, obsbox[0, j]), obsbox[1, j])
+        obs[j] = v + bias[j]
+    if c[_NOISE] > 0.0:
+        _add_noise(rng, i, c[_NOISE], obs)
+    for j in range(nobs):
+        obs[j] = min(max(obs[j], obsbox[0, j]), obsbox[1, j])
     return reward, out
 
 
@@ -131,9 +131,13 @@ def step(X, A, refs, P, C, rng, gust, bias, mix, unmix, box, frac, obsbox, xbox,
         p = P[0] if one_p else P[i]
         if active[i]:
             _command_one(A[i], p, C, mix, unmix, box, frac, thrust, u_cmd[i], raw)
+            if gs > 0.0:
+                for j in range(nw):
+                    wind[j] = 0.0
+                _add_noise(rng, i, gs, wind)
+                for j in range(nw):
+                    gust[i, j] = ga * gust[i, j] + wind[j]
             for j in range(nw):
-                if gs > 0.0:
-                    gust[i, j] = ga * gust[i, j] + gs * _next_normal(rng, i)
                 wind[j] = C[_WIND0 + j] + gust[i, j]
             _integrate_one(n, X[i], thrust, wind, p, C, mix, u_app[i], stages)
         else:

@@ -1,9 +1,15 @@
 """The one physics the environments step: rigid body, optional effects, RK4, observation.
 
 The equations of motion live once, as elementwise functions in :mod:`quad_envs.dynamics`
-(numpy evaluates them on arrays, numba compiles them for single states). This module adds
-the effects around them and compiles one batched step kernel per vehicle with numba; the
-single env is the vector env's kernel with a batch of one, so the two agree to the bit.
+(numpy evaluates them on arrays, numba compiles them for single states). Each vehicle
+module compiles them, with the effects below, into its point functions (``point_field``,
+``point_observe`` of its :class:`~quad_envs.vehicles.Vehicle` record). This module builds
+one batched step kernel per vector field from them (:func:`vehicle_kernels`; a surrogate's
+generated rhs: :func:`point_rhs_kernels`): the kernel source
+(:mod:`quad_envs.kernel_template`) is written with the lines that bind the vehicle's
+functions into the cache folder (:func:`cache_dir`) and imported, so numba's on-disk cache
+applies and no vehicle switch exists in the kernel. The single env is the vector env's
+kernel with a batch of one, so the two agree to the bit.
 
 Effects (:class:`Effects`), each off by default; units SI, frames as in
 :mod:`quad_envs.dynamics` (z up; 6-DOF velocities in the body frame):
@@ -31,8 +37,9 @@ Effects (:class:`Effects`), each off by default; units SI, frames as in
   termination use the true state.
 
 Random numbers (gusts, observation noise) come from a counter-based generator per member
-(splitmix64) whose seed each episode draws from the env's ``np_random``: reproducible per
-seed, the same in the single and the vector env.
+(splitmix64, normals in pairs by Marsaglia's polar method) whose seed each episode draws
+from the env's ``np_random``: reproducible per seed, the same in the single and the vector
+env.
 """
 
 from __future__ import annotations
@@ -264,7 +271,7 @@ def pack_consts(
     return c
 
 
-# -- random numbers (splitmix64 + Box-Muller), per member ----------------------------------
+# -- random numbers (splitmix64 + Marsaglia's polar method), per member ---------------------
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -282,10 +289,27 @@ def _next_uniform(rng: Any, i: int) -> float:
 
 
 @numba.njit(cache=True, inline="always")
-def _next_normal(rng: Any, i: int) -> float:
-    u1 = _next_uniform(rng, i)
-    u2 = _next_uniform(rng, i)
-    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+def _next_normal_pair(rng: Any, i: int) -> tuple[float, float]:
+    """Two independent standard normals (Marsaglia's polar method: no trigonometry)."""
+    while True:
+        a = 2.0 * _next_uniform(rng, i) - 1.0
+        b = 2.0 * _next_uniform(rng, i) - 1.0
+        s = a * a + b * b
+        if 0.0 < s < 1.0:
+            break
+    scale = math.sqrt(-2.0 * math.log(s) / s)
+    return a * scale, b * scale
+
+
+@numba.njit(cache=True, inline="always")
+def _add_noise(rng: Any, i: int, scale: float, values: Any) -> None:
+    """Adds ``scale`` times independent standard normals to every entry of ``values``."""
+    n = values.shape[0]
+    for j in range(0, n, 2):
+        z0, z1 = _next_normal_pair(rng, i)
+        values[j] += scale * z0
+        if j + 1 < n:
+            values[j + 1] += scale * z1
 
 
 # -- shared pieces of the kernels (inlined into them) ------------------------------------

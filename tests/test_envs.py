@@ -10,6 +10,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import quad_envs
+import quad_envs.vehicles
 from quad_envs.controllers import PlanarPD, Quad6DOFPD
 
 IDS = quad_envs.ENV_IDS
@@ -232,3 +233,55 @@ def test_record_video_writes_a_real_time_video(env_id, tmp_path):
     env.close()
     videos = list(tmp_path.glob("*.mp4"))
     assert len(videos) == 1 and videos[0].stat().st_size > 0
+
+
+@pytest.mark.parametrize("name", sorted(quad_envs.vehicles.VEHICLES))
+def test_kernel_observation_equals_the_vehicle_observe(name):
+    """The kernels' numba observation and the numpy ``vehicle.observe`` agree on random states."""
+    vehicle = quad_envs.vehicles.get_vehicle(name)
+    rng = np.random.default_rng(0)
+    n, n_ref = vehicle.n_states, len(vehicle.ref_names)
+    states = rng.normal(size=(50, n)) * 3.0
+    refs = rng.normal(size=(50, n_ref)) * 3.0
+    expected = vehicle.observe(states, refs)
+    out = np.empty(expected.shape[1])
+    for x, ref, row in zip(states, refs, expected, strict=True):
+        vehicle.point_observe(x, ref, out)
+        np.testing.assert_allclose(out, row, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(quad_envs.vehicles.VEHICLES))
+def test_kernel_field_equals_the_vehicle_rhs(name):
+    """Without effects the point field is the vehicle's numpy rhs (the same equations)."""
+    from quad_envs import physics
+
+    vehicle = quad_envs.vehicles.get_vehicle(name)
+    rng = np.random.default_rng(1)
+    p = physics.pack_params(vehicle.params)
+    c = physics.pack_consts(0.01, 1, "collective", False, physics.Effects(), 0.0, vehicle.ndim)
+    k = vehicle.n_rotors
+    for _ in range(20):
+        x, u = rng.normal(size=vehicle.n_states), rng.normal(size=vehicle.n_inputs)
+        out = np.empty(vehicle.n_states)
+        vehicle.point_field(x, u, np.zeros(k), np.zeros(vehicle.ndim), p, c, out)
+        np.testing.assert_allclose(out, vehicle.rhs(x, u), rtol=1e-12, atol=1e-12)
+
+
+def test_kernels_are_built_from_the_vehicle_record_into_the_cache(tmp_path, monkeypatch):
+    """A vehicle record is all the kernel factory needs; the module is readable by others."""
+    import dataclasses
+    import os
+    import stat
+
+    from quad_envs import physics
+
+    monkeypatch.setenv("QUAD_SINDY_CACHE", str(tmp_path / "cache"))
+    vehicle = dataclasses.replace(quad_envs.vehicles.PLANAR, name="planar_copy")
+    kernels = physics.vehicle_kernels(vehicle)
+    path = kernels.module.__file__
+    assert os.path.dirname(path) == str(tmp_path / "cache")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o666 & ~umask
+    text = open(path).read()
+    assert "planar_point as _field" in text and "planar_observe_point as _observe" in text

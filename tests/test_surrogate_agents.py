@@ -135,3 +135,25 @@ def test_sb3_smoke_and_determinism(algo):
     a, b = run(), run()
     np.testing.assert_array_equal(a, b)
     assert a.shape == (2,)
+
+
+def test_surrogates_step_the_compiled_model_and_fall_back_with_a_warning(monkeypatch):
+    from identification import surrogate
+    from identification.compiled import CompiledRhs
+    from identification.experiments.truth import model_from_truth
+    from quad_envs import physics
+
+    model = model_from_truth("planar")
+    env = gym.make("PlanarQuadSINDy-v0", model=model)
+    assert isinstance(env.unwrapped._rhs, CompiledRhs)
+    env.close()
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no compiler today")
+
+    monkeypatch.setattr(physics, "point_rhs_kernels", broken)
+    with pytest.warns(RuntimeWarning, match="numpy rhs"):
+        env = surrogate.make_surrogate(model)
+    assert not isinstance(env.unwrapped._rhs, CompiledRhs)
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
