@@ -499,6 +499,9 @@ def report_markdown(metrics: dict[str, Any], model: RotorcraftModel) -> str:
     def fmt(values: Sequence[float], digits: int) -> str:
         return " / ".join(f"{v:.{digits}f}" for v in values)
 
+    def verdict(flags: dict[str, bool]) -> str:
+        return ", ".join(f"{g} {'yes' if ok else 'NO'}" for g, ok in flags.items())
+
     lines = [
         "# Nano-drone benchmark: SINDy rotorcraft model",
         "",
@@ -554,9 +557,10 @@ def report_markdown(metrics: dict[str, Any], model: RotorcraftModel) -> str:
         "",
         "Figures to reach:",
         "",
-        f"- beats every published model at h = 50: {beats['h50']}",
-        f"- beats every published model in SimErr: {beats['simerr']}",
-        f"- no worse than holding the state at h = 1: {short['1']}; at h = 10: {short['10']}",
+        f"- beats every published model at h = 50: {verdict(beats['h50'])}",
+        f"- beats every published model in SimErr: {verdict(beats['simerr'])}",
+        f"- no worse than holding the state at h = 1: {verdict(short['1'])}; "
+        f"at h = 10: {verdict(short['10'])}",
         f"- identified terms: {model.n_terms} (at most 60)",
         f"- thrust term (w' per W): {metrics['thrust_coefficient']:.4g} m/rad^2, "
         f"{100 * kc:+.1f} % from Kt/m = {metrics['thrust_coefficient_nominal']:.4g}",
