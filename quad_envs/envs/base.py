@@ -581,7 +581,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self.action_space = batch_space(self._single_act_space, self.num_envs)
         b = self.num_envs
         self._states = np.zeros((b, self._n_ext))
-        self._k = np.zeros(b, dtype=np.int64)
+        self._steps = np.zeros(b, dtype=np.int64)
         self._needs_reset = np.zeros(b, dtype=bool)
         self._rngs = [np.random.default_rng() for _ in range(b)]
         self._trajs: list[Reference] = []
@@ -590,6 +590,8 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self._gust = np.zeros((b, self.vehicle.ndim))
         self._bias = np.zeros((b, self._obs_low.size))
         self._P = self._P0
+        self._all_active = np.ones(b, dtype=bool)
+        self._steps_bound = 0  # no member has taken more steps since its reset
         self._was_reset = False
 
     def reset(
@@ -610,11 +612,14 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self._reset_members(everyone, state, options.get("trajectory"))
         self._refresh_episode_tables()
         self._needs_reset[:] = False
+        self._steps_bound = 0
         self._was_reset = True
         obs = self._observe_all(self._states, self._references(), self._rng_state, self._bias)
         if self._delay:
-            self._history = np.repeat(obs[:, None, :], self._delay + 1, axis=1)
-            obs = self._history[:, 0].copy()
+            # Ring buffer of the last delay + 1 observations; slot _hist_pos is the newest.
+            self._history = np.repeat(obs[None, :, :], self._delay + 1, axis=0)
+            self._hist_pos = 0
+            obs = obs.copy()
         return obs, {}
 
     def _reset_members(self, mask: FloatArray, state: Any = None, spec: Any = None) -> None:
@@ -629,7 +634,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             self._rng_state[i] = episode.seed
             self._gust[i] = episode.gust
             self._bias[i] = episode.bias
-        self._k[mask] = 0
+        self._steps[mask] = 0
 
     def _update_episode_rows(self, mask: FloatArray) -> None:
         """After an autoreset: writes the new members' waypoints and parameters in place."""
@@ -679,13 +684,13 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
 
     def _references(self) -> FloatArray:
         if self._batched_traj is None:
-            k = np.minimum(self._k, self._n_table - 1)
-            refs = self._shared_refs[k]
-            late = self._k >= self._n_table
-            if late.any():
-                refs[late] = self._trajs[0](self._k[late] * self.dt)
+            refs = np.take(self._shared_refs, self._steps, axis=0, mode="clip")
+            if self._steps_bound >= self._n_table:  # some member may be past the table
+                late = self._steps >= self._n_table
+                if late.any():
+                    refs[late] = self._trajs[0](self._steps[late] * self.dt)
             return refs
-        return self._batched_traj(self._k * self.dt)
+        return self._batched_traj(self._steps * self.dt)
 
     def step(
         self, actions: Any
@@ -698,36 +703,46 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         if a.shape != expected:
             raise ValueError(f"action must have shape {expected}, got {a.shape}")
         resetting = self._needs_reset
-        if resetting.any():
+        any_reset = bool(resetting.any())
+        self._steps_bound += 1
+        if any_reset:
             self._reset_members(resetting)
             self._update_episode_rows(resetting)
-            self._k[~resetting] += 1
+            active = ~resetting
+            self._steps[active] += 1
         else:
-            self._k += 1
+            active = self._all_active
+            self._steps += 1
         refs = self._references()
         obs, reward, end, u, u_cmd = self._advance(
             self._states, a, refs, self._P, self._rng_state, self._gust, self._bias,
-            ~resetting, self._rhs,
+            active, self._rhs,
         )  # fmt: skip
-        terminated = end & ~resetting
-        reward[resetting] = 0.0
-        if self.max_episode_steps is not None:
-            truncated = (self._k >= self.max_episode_steps) & ~resetting
+        if any_reset:
+            terminated = end & active
+            reward[resetting] = 0.0
+        else:
+            terminated = end
+        if self.max_episode_steps is not None and self._steps_bound >= self.max_episode_steps:
+            truncated = self._steps >= self.max_episode_steps
+            if any_reset:
+                truncated &= active
         else:
             truncated = np.zeros(self.num_envs, dtype=bool)
         if self._delay:
-            self._history[:, :-1] = self._history[:, 1:]
-            self._history[:, -1] = obs
-            if resetting.any():
-                self._history[resetting] = obs[resetting, None, :]
-            obs = self._history[:, 0].copy()
+            slots = self._delay + 1
+            self._hist_pos = (self._hist_pos + 1) % slots
+            self._history[self._hist_pos] = obs
+            if any_reset:
+                self._history[:, resetting] = obs[resetting]
+            obs = self._history[(self._hist_pos + 1) % slots].copy()
         self._needs_reset = terminated | truncated
         info = {
             "state": self._states[:, : self._n].copy(),
             "reference": refs,
             "action": u,
             "commanded": u_cmd,
-            "time": self._k * self.dt,
+            "time": self._steps * self.dt,
         }
         if self._rotor_state:
             info["rotor_thrusts"] = self._states[:, self._n :].copy()
@@ -741,9 +756,9 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
 
         if getattr(self, "_renderer", None) is None:
             self._renderer = QuadRenderer(self.vehicle, "rgb_array", self.metadata)
-        refs = self._trajs[0](self._t_table[: int(self._k[0]) + 1])
+        refs = self._trajs[0](self._t_table[: int(self._steps[0]) + 1])
         return self._renderer.draw(
-            self._states[0, : self._n], self._states[:1, : self._n], refs, self._k[0] * self.dt
+            self._states[0, : self._n], self._states[:1, : self._n], refs, self._steps[0] * self.dt
         )
 
     def __getstate__(self) -> dict[str, Any]:

@@ -64,12 +64,15 @@ def planar_point(x: Any, u: Any, thrust: Any, wind: Any, p: Any, c: Any, out: An
         c: Constants vector (:func:`quad_envs.physics.pack_consts`).
         out: dx/dt (written).
     """
-    d = _field(x[2], x[3], x[4], x[5], u[0], u[1], p[P_MASS], p[P_I1], p[P_GRAVITY])
+    # Read once into locals (``out`` may alias ``x`` for the compiler): the drag then shares
+    # the field's sine and cosine of phi.
+    phi, y_dot, z_dot = x[2], x[3], x[4]
+    d = _field(phi, y_dot, z_dot, x[5], u[0], u[1], p[P_MASS], p[P_I1], p[P_GRAVITY])
     for j in range(6):
         out[j] = d[j]
     if c[C_DRAG] != 0.0:
         fy, fz = _drag(
-            x[2], x[3] - wind[0], x[4] - wind[1], p[P_DRAG_LINEAR_XY], p[P_DRAG_LINEAR_Z],
+            phi, y_dot - wind[0], z_dot - wind[1], p[P_DRAG_LINEAR_XY], p[P_DRAG_LINEAR_Z],
             p[P_DRAG_QUADRATIC_XY], p[P_DRAG_QUADRATIC_Z],
         )  # fmt: skip
         out[3] += fy / p[P_MASS]

@@ -78,23 +78,26 @@ def quad6dof_point(x: Any, u: Any, thrust: Any, wind: Any, p: Any, c: Any, out: 
     The equations are :func:`quad_envs.dynamics.quad6dof_field` and
     :func:`quad_envs.dynamics.body_drag`, compiled.
     """
+    # Read once into locals: ``out`` may alias ``x`` for the compiler, which would otherwise
+    # reload the angles and evaluate their sines and cosines again for the drag.
+    phi, theta, psi, vx, vy, vz = x[3], x[4], x[5], x[6], x[7], x[8]
     d = _field(
-        x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10], x[11], u[0], u[1], u[2], u[3],
+        phi, theta, psi, vx, vy, vz, x[9], x[10], x[11], u[0], u[1], u[2], u[3],
         p[P_MASS], p[P_I1], p[P_I2], p[P_I3], p[P_GRAVITY],
     )  # fmt: skip
     for j in range(12):
         out[j] = d[j]
     if c[C_DRAG] != 0.0:
         r = _rotation(
-            math.cos(x[3]), math.sin(x[3]), math.cos(x[4]), math.sin(x[4]),
-            math.cos(x[5]), math.sin(x[5]),
+            math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta),
+            math.cos(psi), math.sin(psi),
         )  # fmt: skip
         # Body-frame air velocity v_B - R^T w.
         wx = r[0] * wind[0] + r[3] * wind[1] + r[6] * wind[2]
         wy = r[1] * wind[0] + r[4] * wind[1] + r[7] * wind[2]
         wz = r[2] * wind[0] + r[5] * wind[1] + r[8] * wind[2]
         fx, fy, fz = _body_drag(
-            x[6] - wx, x[7] - wy, x[8] - wz, p[P_DRAG_LINEAR_XY], p[P_DRAG_LINEAR_Z],
+            vx - wx, vy - wy, vz - wz, p[P_DRAG_LINEAR_XY], p[P_DRAG_LINEAR_Z],
             p[P_DRAG_QUADRATIC_XY], p[P_DRAG_QUADRATIC_Z],
         )  # fmt: skip
         out[6] += fx / p[P_MASS]
