@@ -77,11 +77,16 @@ def bench_envs(
             ``"all"``: every effect on, observation noise and 10 % parameter randomisation).
 
     Returns:
-        Rows ``env, mode, effects, steps_per_s, ratio`` (ratio to Pendulum-v1's single rate).
+        Rows ``env, mode, effects, steps_per_s, ratio`` (ratio to Pendulum-v1's single rate:
+        the median of its measurements before each env and at the end; the first row's
+        ``range`` holds their lowest and highest).
     """
-    pendulum = single_env_rate("Pendulum-v1", min_seconds)
-    rows = [{"env": "Pendulum-v1", "mode": "single", "effects": "-", "steps_per_s": pendulum}]
+    # The machine is shared: Pendulum is measured before each env and at the end, and the
+    # median is the reference, so that a load change during the run moves it less.
+    references = []
+    rows = []
     for env_id in env_ids:
+        references.append(single_env_rate("Pendulum-v1", min_seconds / 2))
         for spec in effects:
             kwargs: dict = {}
             if spec is not None:
@@ -93,6 +98,18 @@ def bench_envs(
             rows.append(
                 {"env": env_id, "mode": f"vector x{num_envs}", "effects": label, "steps_per_s": vec}
             )
+    references.append(single_env_rate("Pendulum-v1", min_seconds / 2))
+    pendulum = float(np.median(references))
+    rows.insert(
+        0,
+        {
+            "env": "Pendulum-v1",
+            "mode": f"single, med{len(references)}",
+            "effects": "-",
+            "steps_per_s": pendulum,
+            "range": (min(references), max(references)),
+        },
+    )
     for row in rows:
         row["ratio"] = row["steps_per_s"] / pendulum
     return rows
@@ -102,9 +119,11 @@ def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
     """Steps/s of the ground truth and of surrogates of it, in one run.
 
     The model is the exact planar model (what ``reproduce`` identifies) in our library:
-    ``PlanarQuadSINDy-v0`` as registered (its numpy ``rhs`` integrated by ``rk4_step``), the
-    same model compiled by numba into the env's kernel (:mod:`identification.compiled`), and
-    a pysindy-``predict`` surrogate (a fitted ``ps.SINDy`` called once per RK4 stage).
+    ``PlanarQuadSINDy-v0`` as registered (the model compiled by numba into the env's kernel,
+    :mod:`identification.compiled`; single and x1024), the model's numpy ``rhs`` integrated
+    by ``rk4_step``, and a pysindy-``predict`` surrogate (a fitted ``ps.SINDy`` called once
+    per RK4 stage). The last row is the time ``gym.make`` of the surrogate took first in
+    this process (numba compiles a new model once per machine, then loads its cache).
     """
     import pysindy as ps
 
@@ -123,22 +142,36 @@ def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
     def predict_rhs(x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return np.asarray(sindy.predict(np.atleast_2d(x), u=np.atleast_2d(u))).reshape(x.shape)
 
+    start = time.perf_counter()
+    gym.make("PlanarQuadSINDy-v0", model=model).close()  # compiles, or loads numba's cache
+    ready = time.perf_counter() - start
     truth = single_env_rate("PlanarQuad-v0", min_seconds)
     registered = single_env_rate("PlanarQuadSINDy-v0", min_seconds, model=model)
+    vec_truth = vector_env_rate("PlanarQuad-v0", 1024, min_seconds)
+    vec_registered = vector_env_rate("PlanarQuadSINDy-v0", 1024, min_seconds, model=model)
+    numpy_rhs = single_env_rate("PlanarQuad-v0", min_seconds, rhs=model.rhs)
     compiled = single_env_rate("PlanarQuad-v0", min_seconds, rhs=compiled_rhs(model))
     slow = single_env_rate("PlanarQuad-v0", min_seconds / 4, rhs=predict_rhs)
     return [
         {"env": "PlanarQuad-v0 (ground truth)", "steps_per_s": truth, "ratio": 1.0},
         {
-            "env": "PlanarQuadSINDy-v0 (numpy rhs)",
+            "env": "PlanarQuadSINDy-v0 (registered)",
             "steps_per_s": registered,
             "ratio": registered / truth,
         },
+        {"env": "PlanarQuad-v0 x1024 (truth)", "steps_per_s": vec_truth, "ratio": 1.0},
         {
-            "env": "surrogate, numba-compiled rhs",
-            "steps_per_s": compiled,
-            "ratio": compiled / truth,
+            "env": "PlanarQuadSINDy-v0 x1024",
+            "steps_per_s": vec_registered,
+            "ratio": vec_registered / vec_truth,
         },
+        {"env": "surrogate, numpy rhs", "steps_per_s": numpy_rhs, "ratio": numpy_rhs / truth},
+        {"env": "surrogate, compiled_rhs", "steps_per_s": compiled, "ratio": compiled / truth},
         {"env": "surrogate via pysindy predict", "steps_per_s": slow, "ratio": slow / truth},
-        {"env": "numba-compiled / predict", "steps_per_s": float("nan"), "ratio": compiled / slow},
+        {"env": "compiled / predict", "steps_per_s": float("nan"), "ratio": compiled / slow},
+        {
+            "env": f"(its first gym.make took {ready:.1f} s)",
+            "steps_per_s": float("nan"),
+            "ratio": float("nan"),
+        },
     ]
