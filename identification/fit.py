@@ -91,6 +91,9 @@ class FitConfig:
         optimizer: One of :data:`OPTIMIZERS`, or a pysindy optimizer object. A string uses
             ``lam`` as its scaled threshold; an object is cloned and used with its own
             settings (its ``threshold`` is set to ``lam`` when ``set_lam`` is true).
+            ``stepwise`` is our forward-backward greedy selection on the QR factor
+            (:mod:`identification.stepwise`), where ``lam`` is the fraction of a target's RMS
+            a term must explain beyond the terms already chosen.
         lam: Scaled sparsity threshold (0: dense least squares).
         window: Steps per row of the integral form (``rk4`` and ``forward``).
         iterations: Fixed-point passes of the ``rk4`` formulation.

@@ -9,7 +9,11 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
    ``lambdas``. For each window the RK4 stage points come from a dense least-squares pilot
    fit on all data (they only need an accurate rhs, not a sparse one); the regression of each
    fold is then a sum of per-trajectory triangular factors (:class:`identification.fit.Gram`),
-   so a candidate costs one small p x p sparse solve.
+   so a candidate costs one small p x p sparse solve. The default optimizer is ``stepwise``
+   (:mod:`identification.stepwise`: forward selection with backward pruning on the factor,
+   one path per equation and fold from which every threshold is read off); near-collinear
+   alternatives are never both entered, and of two the data cannot tell apart the simpler
+   is kept. pysindy optimizers (``stlsq``, ``sr3``, ``ensemble`` or an object) still work.
 3. **Score.** Multi-step open-loop prediction on the held-out data: from start points spread
    over each held-out trajectory, the candidate is integrated by RK4 with the *recorded*
    inputs for ``horizon`` steps; the error of every state, divided by that state's standard
@@ -349,7 +353,8 @@ def select_model(
         trajs: The data (one or more trajectories / clean segments, same variables).
         library: Candidate feature names.
         config: Base fit settings (formulation and optimizer); ``lam`` and ``window`` are
-            chosen here. Default: the RK4 formulation with STLSQ.
+            chosen here. Default: the RK4 formulation with the ``stepwise`` optimizer
+            (:mod:`identification.stepwise`).
         lambdas: Scaled thresholds to try.
         windows: Integral windows to try.
         folds: Largest number of folds.
@@ -376,7 +381,7 @@ def select_model(
         raise ValueError("all trajectories must have the same state and input names")
     variables = [*first.state_names, *first.input_names]
     names = [term_name(parse_term(n, variables)) for n in library]
-    base = config or FitConfig(optimizer="stlsq")
+    base = config or FitConfig(optimizer="stepwise")
     TALLY.counts.clear()
     check_identifiable(Gram.stack(grams(trajs, names, "forward", 1)), names, trajs)
     shortest = min(len(t) for t in trajs)

@@ -48,6 +48,7 @@ def stepwise_path(
     simpler: dict[int, list[int]] | None = None,
     total: float | None = None,
     n_eff: float | None = None,
+    floor: float = 0.0,
 ) -> list[tuple[tuple[int, ...], float]]:
     """The forward-backward greedy path of one target.
 
@@ -62,6 +63,7 @@ def stepwise_path(
             p = 0.001 against the residual variance), the twin is entered instead.
         total: Total sum of squares of the target over the data rows (default ``|b|^2``).
         n_eff: Effective independent rows for the F-test (default: rows of ``a``).
+        floor: The path stops at the first step gaining less (no threshold reads beyond).
 
     Returns:
         One entry per forward step: the support after that step (and its backward pruning),
@@ -71,26 +73,28 @@ def stepwise_path(
     norms2 = np.einsum("ij,ij->j", a, a)
     usable = norms2 > 0
     support: list[int] = []
-    basis = np.zeros((a.shape[0], 0))
-    perp = a.copy()  # columns with the chosen span projected out
+    basis = np.zeros((a.shape[0], 0))  # orthonormal basis of the chosen columns
+    proj2 = np.zeros(p)  # squared norm of each column's part inside that span
     resid = b.copy()
     outside = (float(b @ b) if total is None else total) - float(b @ b)
     n_rows = float(a.shape[0] if n_eff is None else n_eff)
+    complex_of = _invert(simpler or {})
     path: list[tuple[tuple[int, ...], float]] = []
     seen: set[tuple[int, ...]] = set()
     for _ in range(4 * max_terms):  # forward steps, a few undone by backward ones
         if len(support) >= min(max_terms, p):
             break
-        perp2 = np.einsum("ij,ij->j", perp, perp)
+        perp2 = norms2 - proj2
         ok = usable & (perp2 > tol * norms2)
         ok[support] = False
         if not ok.any():
             break
         gains = np.zeros(p)
-        gains[ok] = (perp[:, ok].T @ resid) ** 2 / perp2[ok]
+        gains[ok] = (a[:, ok].T @ resid) ** 2 / perp2[ok]  # a_j . r = a_j_perp . r
         j = int(np.argmax(gains))
         gain = float(gains[j])
-        if gain <= 0:
+        if gain <= 0 or gain < floor:
+            path.append((tuple(sorted(support)), gain))
             break
         twins = [k for k in (simpler or {}).get(j, ()) if ok[k]]
         if twins:
@@ -100,27 +104,29 @@ def stepwise_path(
             if gain - gains[k] <= F_CRITICAL * sigma2:
                 j, gain = k, float(gains[k])
         support.append(j)
-        q = perp[:, j] / np.sqrt(perp2[j])
+        q = a[:, j] - basis @ (basis.T @ a[:, j])
+        q -= basis @ (basis.T @ q)  # twice is enough (Giraud et al.)
+        q /= np.linalg.norm(q)
         basis = np.column_stack([basis, q])
-        perp -= np.outer(q, q @ perp)
+        proj2 += (q @ a) ** 2
         resid -= q * (q @ resid)
         # backward: drop the cheapest chosen column while it costs < half this gain
         pruned = False
         while len(support) > 1:
-            sub = a[:, support]
-            gram_inv = np.linalg.pinv(sub.T @ sub)
-            coef = gram_inv @ (sub.T @ b)
-            loss = coef**2 / np.maximum(np.diag(gram_inv), 1e-300)
+            q_s, r_s = np.linalg.qr(a[:, support])
+            r_inv = np.linalg.inv(r_s)
+            coef = r_inv @ (q_s.T @ b)
+            loss = coef**2 / np.maximum(np.einsum("ij,ij->i", r_inv, r_inv), 1e-300)
             k = int(np.argmin(loss[:-1]))  # never the column just added
             if loss[k] >= BACKWARD_FRACTION * gain:
                 break
             support.pop(k)
             pruned = True
         if simpler:
-            pruned |= _swap_twins(a, b, support, simpler, outside, n_rows)
+            pruned |= _swap_twins(a, b, support, simpler, complex_of, outside, n_rows, tol)
         if pruned:
             basis = np.linalg.qr(a[:, support])[0]
-            perp = a - basis @ (basis.T @ a)
+            proj2 = np.einsum("ij,ij->j", basis.T @ a, basis.T @ a)
             resid = b - basis @ (basis.T @ b)
         key = tuple(sorted(support))
         path.append((key, gain))
@@ -130,13 +136,23 @@ def stepwise_path(
     return path
 
 
+def _invert(simpler: dict[int, list[int]]) -> dict[int, list[int]]:
+    complex_of: dict[int, list[int]] = {}
+    for j, ks in simpler.items():
+        for k in ks:
+            complex_of.setdefault(k, []).append(j)
+    return complex_of
+
+
 def _swap_twins(
     a: np.ndarray,
     b: np.ndarray,
     support: list[int],
     simpler: dict[int, list[int]],
+    complex_of: dict[int, list[int]],
     outside: float,
     n_rows: float,
+    tol: float = COLLINEAR_TOL,
 ) -> bool:
     """Swaps chosen columns for near-collinear twins in place; returns whether any changed.
 
@@ -145,37 +161,46 @@ def _swap_twins(
     significantly more. Early in the path the residual variance still holds unexplained
     signal, so a choice made then is checked again here with the current variance.
     """
-    complex_of: dict[int, list[int]] = {}
-    for j, ks in simpler.items():
-        for k in ks:
-            complex_of.setdefault(k, []).append(j)
-
-    def rss(cols: list[int]) -> float:
-        coef = np.linalg.lstsq(a[:, cols], b, rcond=None)[0]
-        r = b - a[:, cols] @ coef
-        return outside + float(r @ r)
-
+    norms2 = np.einsum("ij,ij->j", a, a)
     changed = False
     for _ in range(2 * len(support)):
-        base = rss(support)
-        sigma2 = base / max(n_rows - len(support), 1.0)
+        twins = {
+            pos: ([t for t in simpler.get(c, ()) if t not in support],
+                  [t for t in complex_of.get(c, ()) if t not in support])
+            for pos, c in enumerate(support)
+        }  # fmt: skip
+        twins = {pos: st for pos, st in twins.items() if st[0] or st[1]}
+        if not twins:
+            break
+        # Without chosen column c the span loses the direction v_c = Q R^-T e_c (unit), which
+        # is orthogonal to everything projected off span(Q): closed forms for every swap.
+        q, r = np.linalg.qr(a[:, support])
+        g = np.linalg.inv(r).T  # columns R^-T e_c
+        v = q @ (g / np.linalg.norm(g, axis=0))
+        cols = sorted({t for st in twins.values() for t in (*st[0], *st[1])} | set(support))
+        at = a[:, cols]
+        perp = at - q @ (q.T @ at)
+        resid = b - q @ (q.T @ b)
+        perp2 = np.einsum("ij,ij->j", perp, perp)
+        pr = perp.T @ resid
+        va = v.T @ at
+        vb = v.T @ b
+        where = {c: i for i, c in enumerate(cols)}
+        rss_s = outside + float(resid @ resid)
         swap = None
-        for pos, c in enumerate(support):
-            for t in simpler.get(c, []):
-                if (
-                    t not in support
-                    and rss([*support[:pos], t, *support[pos + 1 :]]) - base <= F_CRITICAL * sigma2
-                ):
-                    swap = (pos, t)
-                    break
-            if swap is None:
-                better = [
-                    (rss([*support[:pos], t, *support[pos + 1 :]]), t)
-                    for t in complex_of.get(c, [])
-                    if t not in support
-                ]
-                if better and base - min(better)[0] > F_CRITICAL * sigma2:
-                    swap = (pos, min(better)[1])
+        for pos, (simple, richer) in twins.items():
+            idx = [where[t] for t in (support[pos], *simple, *richer)]
+            p2 = perp2[idx] + va[pos, idx] ** 2
+            dot = pr[idx] + va[pos, idx] * vb[pos]
+            valid = p2 > tol * norms2[[support[pos], *simple, *richer]]
+            gains = np.where(valid, dot**2 / np.maximum(p2, 1e-300), -np.inf)
+            rss = rss_s + vb[pos] ** 2 - gains  # RSS with each column in c's place
+            sigma2 = rss[0] / max(n_rows - len(support), 1.0)
+            n_simple = len(simple)
+            if n_simple and rss[1 : 1 + n_simple].min() - rss[0] <= F_CRITICAL * sigma2:
+                swap = (pos, simple[int(np.argmin(rss[1 : 1 + n_simple]))])
+            elif richer and rss[0] - rss[1 + n_simple :].min() > F_CRITICAL * sigma2:
+                swap = (pos, richer[int(np.argmin(rss[1 + n_simple :]))])
             if swap is not None:
                 break
         if swap is None:
@@ -221,9 +246,11 @@ def stepwise_coefficients(
     p = a.shape[1]
     max_terms = min(p, 64) if max_terms is None else max_terms
     out = np.zeros((len(lams), b.shape[1], p))
+    positive = [float(v) for v in lams if v > 0]
+    floor = min(positive) ** 2 * rows if positive and len(positive) == len(lams) else 0.0
     for i in range(b.shape[1]):
         path = stepwise_path(a, b[:, i], max_terms, simpler=simpler, total=float(rows),
-                             n_eff=n_eff or rows)  # fmt: skip
+                             n_eff=n_eff or rows, floor=floor)  # fmt: skip
         refits: dict[tuple[int, ...], np.ndarray] = {}
         for li, lam in enumerate(lams):
             support = support_at(path, float(lam) ** 2 * rows) if lam > 0 else _last(path)

@@ -149,7 +149,7 @@ def identify(
         str, typer.Option("--lambda", help="'auto' (validated) or a threshold")
     ] = "auto",
     method: Annotated[str, typer.Option(help="rk4 | forward | central | smoothed | paper")] = "rk4",
-    optimizer: Annotated[str, typer.Option(help="stlsq | sr3 | ensemble")] = "stlsq",
+    optimizer: Annotated[str, typer.Option(help="stepwise | stlsq | sr3 | ensemble")] = "stepwise",
     window: Annotated[str, typer.Option(help="integral window: 'auto' or steps")] = "auto",
     plot: Annotated[Path | None, typer.Option(help="selection plot (default: OUT.png)")] = None,
 ) -> None:
