@@ -51,6 +51,7 @@ import importlib.util
 import math
 import os
 import sys
+import tempfile
 import types
 import uuid
 from collections.abc import Callable
@@ -409,7 +410,8 @@ class Kernels:
 def cache_dir() -> Path:
     """Folder of the generated kernel modules and numba's cache of them.
 
-    ``$QUAD_SINDY_CACHE`` if set, else ``$XDG_CACHE_HOME/quad-sindy`` (``~/.cache/quad-sindy``).
+    ``$QUAD_SINDY_CACHE`` if set, else ``$XDG_CACHE_HOME/quad-sindy`` (``~/.cache/quad-sindy``);
+    where that cannot be written, ``quad-sindy-<uid>`` in the temporary directory.
     """
     env = os.environ.get("QUAD_SINDY_CACHE")
     if env:
@@ -425,6 +427,8 @@ _BUILT: dict[str, Kernels] = {}
 
 def _ref(func: Any) -> tuple[str, str]:
     """(module, name) of a module-level numba function, checked to be importable."""
+    if func is None:
+        raise ValueError("the vehicle record has no point_field/point_observe to build kernels")
     py = getattr(func, "py_func", func)
     module, name = py.__module__, py.__qualname__
     if "." in name or getattr(importlib.import_module(module), name, None) is not func:
@@ -435,7 +439,14 @@ def _ref(func: Any) -> tuple[str, str]:
 def _write_module(stem: str, text: str) -> Path:
     """Writes ``text`` as ``stem.py`` in the cache folder (atomically, umask permissions)."""
     folder = cache_dir()
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".probe.{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError:  # read-only home: a private folder under the temporary directory
+        folder = Path(tempfile.gettempdir()) / f"quad-sindy-{os.getuid()}"
+        folder.mkdir(mode=0o700, parents=True, exist_ok=True)
     path = folder / f"{stem}.py"
     if path.exists() and path.read_text() == text:
         return path

@@ -5,8 +5,9 @@ one) and step the same compiled kernel (:mod:`quad_envs.physics`): the vehicle's
 motion from :mod:`quad_envs.dynamics`, the optional effects, RK4, observation, reward and
 termination. The single env is the kernel with a batch of one. A surrogate environment is the
 same class with the vector field replaced by an identified model's ``rhs`` (a Python
-``rhs(x, u)`` is integrated by :func:`quad_envs.integrators.rk4_step`; an object with a numba
-``point(x, u, out)`` attribute runs inside the kernel).
+``rhs(x, u)`` is integrated by :func:`quad_envs.integrators.rk4_step`; an object with a
+``point_source`` attribute, the source of a scalar ``point(X, U, out)`` such as
+:class:`identification.compiled.CompiledRhs`, is compiled into the kernel).
 """
 
 from __future__ import annotations
