@@ -6,8 +6,10 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
    turn (k-fold over trajectories, k <= ``folds``); with fewer, each trajectory is cut into
    contiguous blocks and blocks are held out.
 2. **Candidates.** Every integral window in ``windows`` times every threshold in
-   ``lambdas``. For each window the RK4 stage points come from a dense least-squares pilot
-   fit on all data (they only need an accurate rhs, not a sparse one); the regression of each
+   ``lambdas``. For each window the RK4 stage points come from a pilot fit on all data (they
+   only need an accurate rhs, not a sparse one: dense least squares, or for ``stepwise`` its
+   model at the smallest threshold, which stays accurate off the data where dense least
+   squares on a nearly singular library does not); the regression of each
    fold is then a sum of per-trajectory triangular factors (:class:`identification.fit.Gram`),
    so a candidate costs one small p x p sparse solve. The default optimizer is ``stepwise``
    (:mod:`identification.stepwise`: forward selection with backward pruning on the factor,
@@ -394,10 +396,16 @@ def select_model(
     scale = x_all.std(axis=0)
     scale = np.where(scale > 0, scale, 1.0)
 
+    # The stage points need an rhs accurate near the data. Dense least squares is that on a
+    # well-conditioned library; on a nearly singular one (6-DOF at small tilt, condition 6e11)
+    # it is accurate on the data but wild half a step off it, so the stepwise optimizer uses
+    # its own least sparse model of the grid (the smallest threshold) instead.
+    positive = [float(v) for v in lambdas if v > 0]
+    pilot_lam = min(positive) if base.optimizer == "stepwise" and positive else 0.0
     candidates: list[Candidate] = []
     steps = tqdm(total=len(windows) * (k + 1), desc="selecting", disable=not progress)
     for w in windows:
-        pilot = fit_coefficients(units, names, dataclasses.replace(base, lam=0.0, window=w,
+        pilot = fit_coefficients(units, names, dataclasses.replace(base, lam=pilot_lam, window=w,
                                                                     iterations=2))  # fmt: skip
         unit_grams = grams(units, names, base.derivative if base.derivative != "rk4" else "rk4",
                            w, pilot)  # fmt: skip

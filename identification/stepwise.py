@@ -122,7 +122,10 @@ def stepwise_path(
                 break
             support.pop(k)
             pruned = True
-        if simpler:
+        # Twin choices are F-tests against the residual variance, which only moves when a
+        # significant column enters: re-check them then, not in the noise tail of the path.
+        rss_now = outside + float(resid @ resid)
+        if simpler and gain > F_CRITICAL * rss_now / max(n_rows - len(support), 1.0):
             pruned |= _swap_twins(a, b, support, simpler, complex_of, outside, n_rows, tol)
         if pruned:
             basis = np.linalg.qr(a[:, support])[0]

@@ -1,6 +1,7 @@
 """Figures of docs/identification.md: truth-free identification on non-paper vehicles.
 
 Run: MPLBACKEND=Agg .venv/bin/python scripts/identification_figures.py [--quick]
+Run with --optimizer stlsq for the figures before stepwise selection.
 Prints one row per case: data, selection time, chosen window/lambda, support against the truth
 (missed/spurious), worst coefficient error, rhs error, 1 s simulation error / state range.
 """
@@ -26,6 +27,7 @@ from identification.experiments.synthetic import (
     truth_planar,
     truth_quad6dof,
 )
+from identification.fit import FitConfig
 from identification.libraries import planar_library, quad6dof_library
 from identification.selection import select_model
 
@@ -79,7 +81,13 @@ def row(label, model, truth, rhs, clean, seconds, report=None):
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--quick", action="store_true", help="planar only")
+    parser.add_argument(
+        "--optimizer",
+        default="stepwise",
+        help="stepwise (default) | stlsq | sr3 (stlsq: the figures before stepwise)",
+    )
     args = parser.parse_args()
+    config = FitConfig(optimizer=args.optimizer)
     print(
         "| case | time [s] | choice | terms | missed | spurious | worst coef err | "
         "rhs err | 1 s sim err / range |"
@@ -100,7 +108,7 @@ def main() -> None:
         truth = truth_planar(OTHER_PLANAR, spec.drag)
         rhs = planar_drag_rhs(OTHER_PLANAR, spec.drag)
         t0 = time.perf_counter()
-        model, report = select_model(data, lib)
+        model, report = select_model(data, lib, config=config)
         row(f"ours: {label}", model, truth, rhs, clean, time.perf_counter() - t0, report)
         if sigma:
             t0 = time.perf_counter()
@@ -109,14 +117,16 @@ def main() -> None:
                 time.perf_counter() - t0)  # fmt: skip
     big = planar_flights(OTHER_PLANAR, FlightSpec(flights=10, steps=10_000))
     t0 = time.perf_counter()
-    model, report = select_model(big, lib)
+    model, report = select_model(big, lib, config=config)
     row("ours: planar 1e5 rows clean", model, truth_planar(OTHER_PLANAR),
         planar_drag_rhs(OTHER_PLANAR, 0.0), big[:1], time.perf_counter() - t0, report)  # fmt: skip
     if args.quick:
         return
     clean6 = quad6dof_flights(OTHER_6DOF, FlightSpec(flights=4))
     t0 = time.perf_counter()
-    model, report = select_model(clean6, quad6dof_library(), n_models=5)
+    model, report = select_model(
+        clean6, quad6dof_library(), config=config, windows=(1,), n_models=5
+    )
     row("ours: 6-DOF m=0.8 clean, RK4", model, truth_quad6dof(OTHER_6DOF),
         quad6dof_drag_rhs(OTHER_6DOF, 0.0), clean6, time.perf_counter() - t0, report)  # fmt: skip
 
