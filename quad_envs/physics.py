@@ -217,17 +217,25 @@ _MASS, _TAU, _FMIN, _FMAX, _KT = P_MASS, P_TAU, P_FMIN, P_FMAX, P_KT
 _INERTIA_ALIASES = {"I1": ("Jxx", "Ixx"), "I2": ("Jyy",), "I3": ("Jzz",)}
 
 
+def _param_names(params: Any) -> tuple[str | None, ...]:
+    """The attribute of a parameter set behind each entry of :data:`PARAM_FIELDS`."""
+    names = []
+    for name in PARAM_FIELDS:
+        found = [a for a in _INERTIA_ALIASES.get(name, (name,)) if hasattr(params, a)]
+        names.append(found[0] if found else None)
+    return tuple(names)
+
+
+_PARAM_NAMES: dict[type, tuple[str | None, ...]] = {}
+
+
 def pack_params(params: Any) -> FloatArray:
     """The parameter vector (:data:`PARAM_FIELDS`) of one parameter set."""
-    values = []
-    for name in PARAM_FIELDS:
-        for alias in _INERTIA_ALIASES.get(name, (name,)):
-            if hasattr(params, alias):
-                values.append(float(getattr(params, alias)))
-                break
-        else:
-            values.append(0.0)
-    return np.array(values)
+    cls = type(params)
+    names = _PARAM_NAMES.get(cls)
+    if names is None:
+        names = _PARAM_NAMES.setdefault(cls, _param_names(params))
+    return np.array([0.0 if n is None else float(getattr(params, n)) for n in names])
 
 
 # -- constants vector ----------------------------------------------------------------------

@@ -23,8 +23,7 @@ def _rate(step: Callable[[], object], min_seconds: float) -> float:
             return calls / elapsed
 
 
-def single_env_rate(env_id: str, min_seconds: float = 2.0, **kwargs: object) -> float:
-    """Steps per second of ``gym.make(env_id)`` under a fixed in-bounds action."""
+def _single_stepper(env_id: str, **kwargs: object) -> tuple[Callable[[], object], int, object]:
     env = gym.make(env_id, **kwargs)
     env.reset(seed=0)
     action = _hover_action(env)
@@ -34,21 +33,45 @@ def single_env_rate(env_id: str, min_seconds: float = 2.0, **kwargs: object) -> 
         if terminated or truncated:
             env.reset()
 
-    rate = _rate(step, min_seconds)
-    env.close()
-    return rate
+    return step, 1, env
+
+
+def _vector_stepper(
+    env_id: str, num_envs: int, **kwargs: object
+) -> tuple[Callable[[], object], int, object]:
+    env = gym.make_vec(env_id, num_envs=num_envs, **kwargs)
+    env.reset(seed=0)
+    actions = np.tile(_hover_action(env, single=True), (num_envs, 1))
+    return (lambda: env.step(actions)), num_envs, env
+
+
+def _best_rates(
+    steppers: list[tuple[Callable[[], object], int, object]], min_seconds: float, rounds: int
+) -> list[float]:
+    """Env-steps/s of each stepper: measured in turn, ``rounds`` times, the best kept.
+
+    The machine is shared: alternating the measurements exposes each to the same load
+    changes, and the best round is the one least disturbed (as ``timeit`` advises).
+    """
+    best = [0.0] * len(steppers)
+    for _ in range(rounds):
+        for i, (step, width, _) in enumerate(steppers):
+            best[i] = max(best[i], _rate(step, min_seconds / rounds) * width)
+    for _, _, env in steppers:
+        env.close()  # type: ignore[attr-defined]
+    return best
+
+
+def single_env_rate(env_id: str, min_seconds: float = 2.0, **kwargs: object) -> float:
+    """Steps per second of ``gym.make(env_id)`` under a fixed in-bounds action."""
+    return _best_rates([_single_stepper(env_id, **kwargs)], min_seconds, 1)[0]
 
 
 def vector_env_rate(
     env_id: str, num_envs: int = 1024, min_seconds: float = 2.0, **kwargs: object
 ) -> float:
     """Env-steps per second of ``gym.make_vec(env_id, num_envs)`` (native vector env)."""
-    env = gym.make_vec(env_id, num_envs=num_envs, **kwargs)
-    env.reset(seed=0)
-    actions = np.tile(_hover_action(env, single=True), (num_envs, 1))
-    rate = _rate(lambda: env.step(actions), min_seconds) * num_envs
-    env.close()
-    return rate
+    return _best_rates([_vector_stepper(env_id, num_envs, **kwargs)], min_seconds, 1)[0]
 
 
 def _hover_action(env: object, single: bool = False) -> np.ndarray:
@@ -66,6 +89,7 @@ def bench_envs(
     num_envs: int = 1024,
     min_seconds: float = 2.0,
     effects: tuple[object, ...] = (None, "all"),
+    rounds: int = 3,
 ) -> list[dict]:
     """Measures Pendulum-v1 and each env id single and vectorised, in one run.
 
@@ -75,44 +99,29 @@ def bench_envs(
         min_seconds: Minimum timing per measurement.
         effects: Effect settings to measure each env with (``None``: the paper vehicle;
             ``"all"``: every effect on, observation noise and 10 % parameter randomisation).
+        rounds: Every measurement is taken this many times in turn (``min_seconds`` each
+            in all), the best kept (see :func:`_best_rates`).
 
     Returns:
-        Rows ``env, mode, effects, steps_per_s, ratio`` (ratio to Pendulum-v1's single rate:
-        the median of its measurements before each env and at the end; the first row's
-        ``range`` holds their lowest and highest).
+        Rows ``env, mode, effects, steps_per_s, ratio`` (ratio to Pendulum-v1's single rate).
     """
-    # The machine is shared: Pendulum is measured before each env and at the end, and the
-    # median is the reference, so that a load change during the run moves it less.
-    references = []
-    rows = []
+    labels = [("Pendulum-v1", "single", "-")]
+    steppers = [_single_stepper("Pendulum-v1")]
     for env_id in env_ids:
-        references.append(single_env_rate("Pendulum-v1", min_seconds / 2))
         for spec in effects:
             kwargs: dict = {}
             if spec is not None:
                 kwargs = {"effects": spec, "obs_noise_std": 0.01, "param_randomization": 0.1}
             label = "none" if spec is None else str(spec)
-            single = single_env_rate(env_id, min_seconds, **kwargs)
-            vec = vector_env_rate(env_id, num_envs, min_seconds, **kwargs)
-            rows.append({"env": env_id, "mode": "single", "effects": label, "steps_per_s": single})
-            rows.append(
-                {"env": env_id, "mode": f"vector x{num_envs}", "effects": label, "steps_per_s": vec}
-            )
-    references.append(single_env_rate("Pendulum-v1", min_seconds / 2))
-    pendulum = float(np.median(references))
-    rows.insert(
-        0,
-        {
-            "env": "Pendulum-v1",
-            "mode": f"single, med{len(references)}",
-            "effects": "-",
-            "steps_per_s": pendulum,
-            "range": (min(references), max(references)),
-        },
-    )
-    for row in rows:
-        row["ratio"] = row["steps_per_s"] / pendulum
-    return rows
+            labels.append((env_id, "single", label))
+            steppers.append(_single_stepper(env_id, **kwargs))
+            labels.append((env_id, f"vector x{num_envs}", label))
+            steppers.append(_vector_stepper(env_id, num_envs, **kwargs))
+    rates = _best_rates(steppers, min_seconds * rounds, rounds)
+    return [
+        {"env": env, "mode": mode, "effects": eff, "steps_per_s": rate, "ratio": rate / rates[0]}
+        for (env, mode, eff), rate in zip(labels, rates, strict=True)
+    ]
 
 
 def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
@@ -145,12 +154,18 @@ def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
     start = time.perf_counter()
     gym.make("PlanarQuadSINDy-v0", model=model).close()  # compiles, or loads numba's cache
     ready = time.perf_counter() - start
-    truth = single_env_rate("PlanarQuad-v0", min_seconds)
-    registered = single_env_rate("PlanarQuadSINDy-v0", min_seconds, model=model)
-    vec_truth = vector_env_rate("PlanarQuad-v0", 1024, min_seconds)
-    vec_registered = vector_env_rate("PlanarQuadSINDy-v0", 1024, min_seconds, model=model)
-    numpy_rhs = single_env_rate("PlanarQuad-v0", min_seconds, rhs=model.rhs)
-    compiled = single_env_rate("PlanarQuad-v0", min_seconds, rhs=compiled_rhs(model))
+    truth, registered, numpy_rhs, compiled, vec_truth, vec_registered = _best_rates(
+        [
+            _single_stepper("PlanarQuad-v0"),
+            _single_stepper("PlanarQuadSINDy-v0", model=model),
+            _single_stepper("PlanarQuad-v0", rhs=model.rhs),
+            _single_stepper("PlanarQuad-v0", rhs=compiled_rhs(model)),
+            _vector_stepper("PlanarQuad-v0", 1024),
+            _vector_stepper("PlanarQuadSINDy-v0", 1024, model=model),
+        ],
+        3 * min_seconds,
+        3,
+    )
     slow = single_env_rate("PlanarQuad-v0", min_seconds / 4, rhs=predict_rhs)
     return [
         {"env": "PlanarQuad-v0 (ground truth)", "steps_per_s": truth, "ratio": 1.0},

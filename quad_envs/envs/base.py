@@ -204,6 +204,7 @@ class _EnvCore:
         self._python_field = rhs is not None and getattr(rhs, "point_source", None) is None
         self._kernels = _kernels_of(self)
         self._work_array = self._work(1)
+        self._rest_of: tuple[Any, FloatArray] = (None, np.zeros(0))
         self._n_table = int(round(self.duration / self.dt)) + 1
         self._t_table = np.arange(self._n_table) * self.dt
 
@@ -285,12 +286,16 @@ class _EnvCore:
         params = self.params
         if self.param_randomization > 0:
             s = self.param_randomization
+            names = self.vehicle.randomized_fields
+            factors = rng.uniform(1 - s, 1 + s, len(names))  # the stream of scalar draws
             changes = {
-                name: getattr(params, name) * rng.uniform(1 - s, 1 + s)
-                for name in self.vehicle.randomized_fields
+                name: getattr(params, name) * float(f)
+                for name, f in zip(names, factors, strict=True)
             }
             params = params.replace(**changes)
-        x0 = self.vehicle.initial_state(traj(0.0)) + offset
+        if traj is not self._rest_of[0]:  # the rest state on a reference, kept for reuse
+            self._rest_of = (traj, self.vehicle.initial_state(traj(0.0)))
+        x0 = self._rest_of[1] + offset
         if self._rotor_state:
             x0 = np.concatenate([x0, self._hover_thrusts(params)])
         seed = physics.new_seed(rng)
