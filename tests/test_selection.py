@@ -186,3 +186,22 @@ def test_stepwise_keeps_the_simpler_of_two_columns_the_data_cannot_tell_apart():
         xi = solve_lambdas(Gram.from_rows(theta, y[:, None]), FitConfig(optimizer="stepwise"),
                            [1e-3], names)[0, 0]  # fmt: skip
         assert [names[j] for j in np.flatnonzero(xi)] == sorted([kept, "phi"], key=names.index)
+
+
+@pytest.mark.slow
+def test_six_dof_vehicle_at_moderate_tilt_exact_with_automatic_selection():
+    """Another 6-DOF vehicle, 4 x 1000 rows, tilts ~0.2-0.45 rad: the 519-term library has
+    condition number ~6e11 on these data (about a minute)."""
+    from identification.experiments.synthetic import (
+        OTHER_6DOF,
+        quad6dof_drag_rhs,
+        quad6dof_flights,
+        truth_quad6dof,
+    )
+    from identification.libraries import default_library
+
+    trajs = quad6dof_flights(OTHER_6DOF, FlightSpec(flights=4))
+    model, _ = select_model(trajs, default_library("quad6dof"), windows=(1,), n_models=5)
+    check = check_support(model, truth_quad6dof(OTHER_6DOF))
+    assert check.exact_support, (check.missed, check.spurious)
+    assert rhs_error(model, quad6dof_drag_rhs(OTHER_6DOF, 0.0), trajs) < 1e-5
