@@ -333,6 +333,52 @@ def resolve_collinear(
     return xi, notes
 
 
+def indistinguishable_twins(
+    xi: np.ndarray,
+    gram: Gram,
+    feature_names: Sequence[str],
+    state_names: Sequence[str],
+    window: int,
+) -> list[str]:
+    """Warnings for chosen terms whose near-collinear twin fits the data as well.
+
+    For each chosen term with a near-collinear twin (see :func:`collinear_pairs`) outside the
+    model, the twin is put in its place; when the residual changes by no more than the F-test
+    resolves (p = 0.001, rows / window effective samples), the data cannot tell the two
+    apart, and the warning names the pair and the term kept (the simpler, by construction).
+    """
+    pairs = collinear_pairs(gram, feature_names)
+    if not pairs:
+        return []
+    a, z = gram.r, gram.z
+    total = np.linalg.norm(gram.r_aug[:, gram.p :], axis=0) ** 2
+    n_eff = max(gram.rows / window, 2.0)
+    notes = []
+    for i, state in enumerate(state_names):
+        support = list(np.flatnonzero(xi[i]))
+        if not support:
+            continue
+        rss, _ = _rss(a, z[:, i], support)
+        outside = max(total[i] - float(z[:, i] @ z[:, i]), 0.0)
+        sigma2 = (rss + outside) / max(n_eff - len(support), 1.0)
+        for simple, complex_, cosine in pairs:
+            for kept, other in ((simple, complex_), (complex_, simple)):
+                if kept not in support or other in support:
+                    continue
+                trial = [other if c == kept else c for c in support]
+                change = _rss(a, z[:, i], trial)[0] - rss
+                if change <= F_CRITICAL * sigma2:
+                    notes.append(
+                        f"{state}': {term_name(parse_term(feature_names[simple]))!r} and "
+                        f"{term_name(parse_term(feature_names[complex_]))!r} are nearly "
+                        f"collinear on this data (|cos| = {cosine:.6f}) and fit it equally "
+                        f"well (residual change {change / max(sigma2, 1e-300):.2g} variances, "
+                        f"F-test needs {F_CRITICAL}): kept "
+                        f"{term_name(parse_term(feature_names[kept]))!r}"
+                    )
+    return notes
+
+
 # -- the entry point --------------------------------------------------------------------
 @serial_blas
 def select_model(
@@ -447,6 +493,8 @@ def select_model(
     final_gram = Gram.stack(grams(trajs, names, "rk4", best.window, xi))
     xi, notes = resolve_collinear(xi, final_gram, names, first.state_names, best.window)
     report.warnings += notes
+    report.warnings += indistinguishable_twins(xi, final_gram, names, first.state_names,
+                                               best.window)  # fmt: skip
     std = prob = None
     if n_models > 0:
         xi, std, prob, dropped = _bootstrap(trajs, names, final_cfg, xi, n_models, seed)

@@ -91,6 +91,14 @@ def stepwise_path(
             break
         gains = np.zeros(p)
         gains[ok] = (a[:, ok].T @ resid) ** 2 / perp2[ok]  # a_j . r = a_j_perp . r
+        if simpler and support:
+            # a twin of a chosen term enters beside it only when significant (F-test)
+            paired = [t for c in support for t in (*simpler.get(c, ()), *complex_of.get(c, ()))]
+            rss_now = outside + float(resid @ resid)
+            sigma2 = rss_now / max(n_rows - len(support) - 1, 1.0)
+            weak = np.zeros(p, dtype=bool)
+            weak[paired] = True
+            gains[weak & (gains <= F_CRITICAL * sigma2)] = 0.0
         j = int(np.argmax(gains))
         gain = float(gains[j])
         if gain <= 0 or gain < floor:
