@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -336,8 +337,15 @@ def run_experiment(
         runs[method][seed] = result
         echo(f"done: {method} seed {seed}")
 
+    started = time.perf_counter()
     run_jobs(run_job, todo, workers, address, on_done=save)
-    results = {"config": settings, "runs": runs, "summary": summarize(runs, seed_list)}
+    wall = time.perf_counter() - started
+    results = {
+        "config": settings,
+        "runs": runs,
+        "summary": summarize(runs, seed_list),
+        "run": {"jobs": len(todo), "workers": workers, "wall_seconds": wall},
+    }
     write_json(out / "mbrl.json", results)
     plot_curves(results, out / "mbrl.png")
     return results
