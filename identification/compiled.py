@@ -15,11 +15,17 @@ from typing import Any
 import numba
 import numpy as np
 
-from identification.features import parse_term
+from identification.features import Factor, parse_term
 from identification.model import IdentifiedModel
 
 
-def _factor_code(var: str, kind: str, k: int) -> str:
+def _factor_code(factor: Factor, index: dict[str, str]) -> str:
+    """Scalar Python code of one factor (every kind of the feature grammar)."""
+    if factor.kind == "norm":
+        return f"math.sqrt({' + '.join(f'{index[v]} ** 2' for v in factor.variables())})"
+    var, kind, k = index[factor.var], factor.kind, factor.k
+    if kind == "abs":
+        return f"abs({var})"
     if kind == "pow":
         return var if k == 1 else f"{var} ** {k}"
     arg = var if k == 1 else f"{k} * {var}"
@@ -47,7 +53,7 @@ def point_source(model: IdentifiedModel) -> str:
                 key = (f.var, f.kind, f.k)
                 if key not in factors:
                     factors[key] = f"f{len(factors)}"
-                    lines.append(f"    {factors[key]} = {_factor_code(index[f.var], *key[1:])}")
+                    lines.append(f"    {factors[key]} = {_factor_code(f, index)}")
                 codes.append(factors[key])
             parts.append(" * ".join([f"({c!r})", *codes]))
         lines.append(f"    out[{i}] = {' + '.join(parts) if parts else '0.0'}")

@@ -142,3 +142,23 @@ def test_hidden_rotors_drift_more_than_observed(tmp_path: object) -> None:
     observed = result.errors["lag, rotors observed: identified"]["position"]
     assert np.all(observed < 1e-3 * hidden)
     d.plot_drift(result, str(tmp_path / "drift.png"))  # type: ignore[operator]
+
+
+def test_compiled_point_code_handles_abs_and_norm() -> None:
+    """The scalar code the env kernels compile equals the numpy rhs for drag terms."""
+    import math
+
+    from identification.compiled import point_source
+
+    names = ["y_dot", "z_dot", "phi_dot", "u1 sin(phi)", "y_dot abs(y_dot)",
+             "norm(y_dot z_dot) z_dot", "u2", "1"]  # fmt: skip
+    xi = np.random.default_rng(0).normal(size=(6, len(names)))
+    model = IdentifiedModel(names, xi, ("y", "z", "phi", "y_dot", "z_dot", "phi_dot"),
+                            ("u1", "u2"))  # fmt: skip
+    namespace: dict = {"math": math}
+    exec(point_source(model), namespace)  # noqa: S102
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        x, u, out = rng.normal(size=6), rng.normal(size=2), np.empty(6)
+        namespace["point"](x, u, out)
+        np.testing.assert_allclose(out, model.rhs(x, u), rtol=1e-12, atol=1e-12)
