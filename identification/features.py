@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from quad_envs.dynamics import _unpack
+from quad_envs.dynamics import components
 
 _TOKEN = re.compile(r"[A-Za-z_]\w*\([^)]*\)|\S+")
 _FUNC = re.compile(r"^(sin|cos|tan|sec)\((?:(\d+)\s+)?([A-Za-z_]\w*)\)$")
@@ -177,7 +177,7 @@ def _header(
     # after broadcasting the batch axes of X and U (only when they differ);
     # torch: ``movedim`` does the same without the deprecated n-d ``.T``.
     if xp is np:
-        lines = ["    X, U = _unpack(X, U)"]
+        lines = ["    X, U = components(X, U)"]
     else:
         lines = [
             "    batch = xp.broadcast_shapes(X.shape[:-1], U.shape[:-1])",
@@ -260,7 +260,7 @@ def compile_rhs(
 
 def _build(fname: str, lines: list[str], xp: Any) -> Callable[[Any, Any], Any]:
     source = f"def {fname}(X, U):\n" + "\n".join(lines) + "\n"
-    namespace: dict[str, Any] = {"xp": xp, "_unpack": _unpack}
+    namespace: dict[str, Any] = {"xp": xp, "components": components}
     exec(compile(source, f"<quad-sindy {fname}>", "exec"), namespace)  # noqa: S102 (names are parsed)
     func = namespace[fname]
     func.source = source

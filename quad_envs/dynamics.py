@@ -36,7 +36,7 @@ PLANAR_ANGLE_INDICES: tuple[int, ...] = (2,)
 QUAD6DOF_ANGLE_INDICES: tuple[int, ...] = (3, 4, 5)
 
 
-def _unpack(x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+def components(x: FloatArray, u: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Component views of x and u with a common batch shape, component axis first.
 
     ``.T`` reverses every axis, so each component has the batch axes reversed; the rhs
@@ -93,7 +93,7 @@ def planar_rhs(x: FloatArray, u: FloatArray, params: PlanarQuadParams) -> FloatA
     Returns:
         dx/dt, shape (..., 6).
     """
-    (_, _, phi, y_dot, z_dot, phi_dot), (u1, u2) = _unpack(x, u)
+    (_, _, phi, y_dot, z_dot, phi_dot), (u1, u2) = components(x, u)
     return np.array(
         planar_field(phi, y_dot, z_dot, phi_dot, u1, u2, params.mass, params.Ixx, params.gravity)
     ).T
@@ -289,7 +289,7 @@ def quad6dof_rhs(x: FloatArray, u: FloatArray, params: Quad6DOFParams) -> FloatA
     Returns:
         dx/dt, shape (..., 12).
     """
-    (_, _, _, phi, theta, psi, vx, vy, vz, p, q, r), (u1, u2, u3, u4) = _unpack(x, u)
+    (_, _, _, phi, theta, psi, vx, vy, vz, p, q, r), (u1, u2, u3, u4) = components(x, u)
     return np.array(
         quad6dof_field(
             phi,
