@@ -12,12 +12,15 @@ fitted pysindy model is converted to an :class:`IdentifiedModel` through its fea
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
 import pysindy as ps
+from sklearn.exceptions import ConvergenceWarning
 
 from identification.data import Trajectory
+from identification.fit import TALLY
 from identification.libraries import paper_planar_library
 from identification.model import IdentifiedModel
 
@@ -57,12 +60,15 @@ def fit_paper(
         feature_library=paper_planar_library(include_duplicate=True),
         differentiation_method=ps.FiniteDifference(order=1),
     )
-    model.fit(
-        [tr.x for tr in trajs],
-        t=[tr.t for tr in trajs],
-        u=[tr.u for tr in trajs],
-        feature_names=[*first.state_names, *first.input_names],
-    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ConvergenceWarning)
+        model.fit(
+            [tr.x for tr in trajs],
+            t=[tr.t for tr in trajs],
+            u=[tr.u for tr in trajs],
+            feature_names=[*first.state_names, *first.input_names],
+        )
+    TALLY.add([w for w in caught if issubclass(w.category, ConvergenceWarning)])
     return from_pysindy(
         model, "planar", method="paper (forward difference + SR3-L1)", optimizer="sr3-l1",
         **{"lambda": lam, "dt": first.dt, "n_samples": int(sum(len(t) for t in trajs))},

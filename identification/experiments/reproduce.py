@@ -26,7 +26,7 @@ from identification.experiments.evaluate import (
 from identification.experiments.paper import PAPER_LAMBDA, fit_paper
 from identification.experiments.plots import plot_abs_error, plot_comparison, plot_curves
 from identification.experiments.truth import Comparison, compare_coefficients, planar_truth
-from identification.fit import FitConfig, fit
+from identification.fit import TALLY, FitConfig, fit
 from identification.libraries import planar_library
 from identification.model import IdentifiedModel
 from identification.selection import SELECT_LAMBDAS, SelectionReport, select_model
@@ -91,6 +91,7 @@ def run(
     lib = planar_library()
     truth = planar_truth()
 
+    TALLY.counts.clear()
     echo("simulating cases A, B, C (RK4, dt = 0.01 s, 10 s, paper PD controller)")
     runs = {case: simulate_case(case) for case in "ABC"}
     for case, run_ in runs.items():
@@ -179,6 +180,8 @@ def run(
     }
     write_json(out / "metrics.json", _jsonable(metrics))
     atomic_write_text(out / "report.md", _report(metrics, comps, lib))
+    if TALLY.summary():
+        echo(TALLY.summary())
     echo(f"wrote report.md, model.json, metrics.json and figures to {out}/")
     return metrics
 
