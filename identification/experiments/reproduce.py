@@ -105,7 +105,7 @@ def run(
 
     echo(
         f"ours: {len(lambdas)} thresholds x windows, chosen by cross-validated prediction on "
-        "the training data alone (RK4-consistent regression, STLSQ)"
+        "the training data alone (RK4-consistent regression, stepwise selection)"
     )
     ours, selection = select_model(train, lib, lambdas=lambdas, system="planar")
     ours.save(out / "model.json")
@@ -149,8 +149,8 @@ def run(
         echo(f"fitting the authors' own case C file {authors_csv}")
         data = [read_csv(authors_csv, AUTHORS_COLUMNS)]
         best = selection.best
-        ours_a = fit(data, lib, FitConfig(optimizer="stlsq", lam=best.lam, window=best.window),
-                     "planar")  # fmt: skip
+        chosen = FitConfig(optimizer=ours.meta["optimizer"], lam=best.lam, window=best.window)
+        ours_a = fit(data, lib, chosen, "planar")
         paper_a = fit_paper(data, PAPER_LAMBDA)
         authors = {}
         for label, model in (("ours", ours_a), ("paper_method", paper_a)):
@@ -230,7 +230,8 @@ def _report(metrics: dict, comps: dict, lib: list[str]) -> str:
         "",
         "## Discovered equations",
         "",
-        f"Ours (RK4-consistent regression, STLSQ, lambda = {metrics['lambda']:g}, chosen by "
+        f"Ours (RK4-consistent regression, {ours['optimizer']}, lambda = {metrics['lambda']:g}, "
+        "chosen by "
         "cross-validated prediction on the training data):",
         "",
         "```",
