@@ -5,7 +5,9 @@ only trajectories; ``rollouts`` makes data from environments; ``experiments`` ho
 reproductions and studies that may compare with a known truth.
 
 Importing the package registers the surrogate ids ``PlanarQuadSINDy-v0`` and
-``Quad6DOFSINDy-v0`` (``gym.make(id, model=...)`` with a model or its JSON path).
+``Quad6DOFSINDy-v0`` (``gym.make(id, model=...)`` with a model or its JSON path), and
+``CrazyflieSINDy-v0``: a rotorcraft model identified from real flights
+(:mod:`identification.rotorcraft`) flying the motor-speed Crazyflie env.
 """
 
 from __future__ import annotations
@@ -25,3 +27,11 @@ for _env_id, _base in zip(SURROGATE_IDS, ("PlanarQuad-v0", "Quad6DOF-v0"), stric
             max_episode_steps=quad_envs.MAX_EPISODE_STEPS,
             kwargs={"base_id": _base},
         )
+
+if "CrazyflieSINDy-v0" not in registry:
+    register(
+        id="CrazyflieSINDy-v0",
+        entry_point="identification.surrogate:make_rotorcraft_surrogate",
+        vector_entry_point="identification.surrogate:make_rotorcraft_surrogate_vector",
+        max_episode_steps=quad_envs.MAX_EPISODE_STEPS,
+    )

@@ -270,6 +270,21 @@ class RotorcraftModel:
             lines.append(f"{state}' = {rhs}")
         return lines
 
+    def hover_speeds(self) -> np.ndarray:
+        """The four equal-time motor speeds that zero w', p', q', r' at rest, level [rad/s].
+
+        At rest only the constant, gravity (gz = 1) and squared-speed mix terms act; their
+        rows for w, p, q, r are linear in the squared speeds (least squares where a row has
+        no motor term). Negative squares are clipped to zero.
+        """
+        names = FEATURE_NAMES
+        mix = np.array([[1, 1, 1, 1], [-1, -1, 1, 1], [-1, 1, 1, -1], [-1, 1, -1, 1]], float)
+        rows = self.coefficients[2:6]
+        cols = [names.index(n) for n in ("W", "Mx", "My", "Mz")]
+        offset = rows[:, names.index("1")] + rows[:, names.index("gz")]
+        squares = np.linalg.lstsq(rows[:, cols] @ mix, -offset, rcond=None)[0]
+        return np.sqrt(np.maximum(squares, 0.0))
+
     # -- simulation -------------------------------------------------------------------
     def actuator_states(self, omega: np.ndarray) -> np.ndarray:
         """Causal first-order filter of measured speeds (N, 4): the actuator state at each sample.

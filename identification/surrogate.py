@@ -116,6 +116,48 @@ def make_surrogate_vector(
     return env
 
 
+def _rotorcraft_env(model: Any, vector: bool, kwargs: dict[str, Any]) -> tuple[Any, dict]:
+    """The motor-speed env class and its options for a rotorcraft model (or its JSON path)."""
+    from identification.rotorcraft import RotorcraftModel, load_rotorcraft
+    from quad_envs.envs.crazyflie import CrazyflieMotorsEnv, CrazyflieMotorsVectorEnv
+    from quad_envs.vehicles.crazyflie_motors import CRAZYFLIE_MOTOR_SPEEDS
+
+    if model is None:
+        raise ValueError("a rotorcraft surrogate needs model= (a RotorcraftModel or its JSON path)")
+    if not isinstance(model, RotorcraftModel):
+        model = load_rotorcraft(model)
+    params = kwargs.pop("params", None) or CRAZYFLIE_MOTOR_SPEEDS
+    # Reset at the speeds the identified model hovers at (its own thrust and trim).
+    params = params.replace(hover_speeds=tuple(float(s) for s in model.hover_speeds()))
+    cls = CrazyflieMotorsVectorEnv if vector else CrazyflieMotorsEnv
+    return model, cls, {**kwargs, "params": params}
+
+
+def make_rotorcraft_surrogate(model: Any = None, **kwargs: Any) -> gym.Env:
+    """The Crazyflie motor-speed env stepping a model identified from real flights.
+
+    The :class:`identification.rotorcraft.RotorcraftModel` (or its JSON path) replaces the
+    nominal physics of ``CrazyflieMotors-v0``: its 16 states (rigid body and actuator
+    states) and motor-speed inputs are that vehicle's, the actuator states start at the
+    model's hover speeds (:meth:`RotorcraftModel.hover_speeds`). Its numpy ``rhs`` is
+    integrated by the env's RK4 (no compiled kernel).
+    """
+    model, cls, options = _rotorcraft_env(model, False, dict(kwargs))
+    env = cls(rhs=model.rhs, **options)
+    env.model = model
+    return env
+
+
+def make_rotorcraft_surrogate_vector(
+    model: Any = None, num_envs: int = 1, **kwargs: Any
+) -> gym.vector.VectorEnv:
+    """Native vector version of :func:`make_rotorcraft_surrogate`."""
+    model, cls, options = _rotorcraft_env(model, True, dict(kwargs))
+    env = cls(num_envs=num_envs, rhs=model.rhs, **options)
+    env.model = model
+    return env
+
+
 def register_surrogate(
     model: IdentifiedModel | str | Path,
     env_id: str,

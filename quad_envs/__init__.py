@@ -30,3 +30,15 @@ for _env_id, (_single, _vector) in _ENVS.items():
         )
 
 ENV_IDS: tuple[str, ...] = tuple(_ENVS)
+
+MOTOR_SPEED_ENV_IDS: tuple[str, ...] = ("CrazyflieMotors-v0",)
+"""Vehicles commanded in motor speeds with the motors as states (no presets, action modes or
+rotor dynamics to choose): kept out of :data:`ENV_IDS`, whose tests sweep those options."""
+
+if "CrazyflieMotors-v0" not in registry:
+    register(
+        id="CrazyflieMotors-v0",
+        entry_point="quad_envs.envs.crazyflie:CrazyflieMotorsEnv",
+        vector_entry_point="quad_envs.envs.crazyflie:CrazyflieMotorsVectorEnv",
+        max_episode_steps=MAX_EPISODE_STEPS,
+    )

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from quad_envs.vehicles.base import Controller, Vehicle, View
+from quad_envs.vehicles.crazyflie_motors import CRAZYFLIE_MOTORS
 from quad_envs.vehicles.planar import PLANAR
 from quad_envs.vehicles.quad6dof import QUAD6DOF
 
-VEHICLES: dict[str, Vehicle] = {v.name: v for v in (PLANAR, QUAD6DOF)}
+VEHICLES: dict[str, Vehicle] = {v.name: v for v in (PLANAR, QUAD6DOF, CRAZYFLIE_MOTORS)}
 """Every registered vehicle with its default (the paper's) parameters."""
 
 
@@ -20,4 +21,13 @@ def get_vehicle(name: str) -> Vehicle:
         ) from None
 
 
-__all__ = ["PLANAR", "QUAD6DOF", "VEHICLES", "Controller", "Vehicle", "View", "get_vehicle"]
+__all__ = [
+    "CRAZYFLIE_MOTORS",
+    "PLANAR",
+    "QUAD6DOF",
+    "VEHICLES",
+    "Controller",
+    "Vehicle",
+    "View",
+    "get_vehicle",
+]
