@@ -488,7 +488,7 @@ def solve_lambdas(
     b = gram.z / row[None, :]
     twins = simpler_twins(a, feature_names) if feature_names is not None else None
     rows = max(gram.rows, 1)
-    coef_s = stepwise_coefficients(a, b, rows, lams, simpler=twins, n_eff=rows / config.window)
+    coef_s = stepwise_coefficients(a, b, rows, lams, simpler=twins, n_eff=rows)
     for li, lam in enumerate(lams):
         if lam == 0:
             coef_s[li] = np.linalg.lstsq(a, b, rcond=None)[0].T
