@@ -17,11 +17,6 @@ import numpy as np
 import pysindy as ps
 
 from identification.features import parse_term, term_name
-from quad_envs.dynamics import (
-    PLANAR_INPUT_NAMES,
-    PLANAR_STATE_NAMES,
-    QUAD6DOF_INPUT_NAMES,
-)
 
 
 def paper_planar_library(include_duplicate: bool = True) -> ps.GeneralizedLibrary:
@@ -50,37 +45,28 @@ def library_names(
     return list(library.get_feature_names(names))
 
 
+def vehicle_library(name: str) -> list[str]:
+    """The physics-informed library a registered vehicle's record names, in canonical names."""
+    from quad_envs.vehicles import get_vehicle
+
+    return [term_name(parse_term(n)) for n in get_vehicle(name).library()]
+
+
 def planar_library() -> list[str]:
-    """Default planar library: the paper's 24 distinct terms (canonical names).
+    """Default planar library: the paper's 24 distinct terms (the planar vehicle's record).
 
     1, y, z, y_dot, z_dot, phi_dot, u1, u2 and each of them times sin(phi) and cos(phi).
     """
-    raw = library_names(paper_planar_library(False), PLANAR_STATE_NAMES, PLANAR_INPUT_NAMES)
-    return [term_name(parse_term(n)) for n in raw]
+    return vehicle_library("planar")
 
 
 def quad6dof_library() -> list[str]:
-    """Default 6-DOF library (519 terms): trig products times velocities, rates, inputs.
+    """Default 6-DOF library (519 terms, from the 6-DOF vehicle's record).
 
-    Every product f(phi) g(theta) h(psi) with f in {1, sin, cos, tan, sec}, g and h in
-    {1, sin, cos}, times one of {1, u, v, w, p, q, r, u1..u4}; the 21 quadratic products of
-    velocities and rates (gyroscopic and Coriolis terms); and x, y, z as distractors.
-    The true 6-DOF model (36 terms) lies in it.
+    Trig products of the Euler angles times velocities, rates and inputs, gyroscopic
+    products, and distractors.
     """
-    phi = ["", "sin(phi)", "cos(phi)", "tan(phi)", "sec(phi)"]
-    theta = ["", "sin(theta)", "cos(theta)"]
-    psi = ["", "sin(psi)", "cos(psi)"]
-    mult = ["", "u", "v", "w", "p", "q", "r", *QUAD6DOF_INPUT_NAMES]
-    names = []
-    for f, g, h, m in itertools.product(phi, theta, psi, mult):
-        names.append(" ".join(x for x in (f, g, h, m) if x) or "1")
-    moving = ["u", "v", "w", "p", "q", "r"]
-    names += [
-        f"{a} {b}" if a != b else f"{a}^2"
-        for a, b in itertools.combinations_with_replacement(moving, 2)
-    ]
-    names += ["x", "y", "z"]
-    return [term_name(parse_term(n)) for n in names]
+    return vehicle_library("quad6dof")
 
 
 def generic_library(
@@ -154,16 +140,17 @@ PRESETS = ("planar", "quad6dof", "planar_drag", "quad6dof_drag")
 
 
 def default_library(system: str) -> list[str]:
-    """The physics-informed default library of a preset (:data:`PRESETS`)."""
-    if system == "planar":
-        return planar_library()
-    if system == "quad6dof":
-        return quad6dof_library()
+    """The library of a preset (:data:`PRESETS`) or of any registered vehicle's record."""
+    from quad_envs.vehicles import VEHICLES
+
     if system == "planar_drag":
         return planar_drag_library()
     if system == "quad6dof_drag":
         return quad6dof_drag_library()
-    raise ValueError(f"unknown system {system!r}; valid choices: {', '.join(PRESETS)}")
+    if system in VEHICLES:
+        return vehicle_library(system)
+    valid = ", ".join(dict.fromkeys([*PRESETS, *VEHICLES]))
+    raise ValueError(f"unknown system {system!r}; valid choices: {valid}")
 
 
 @dataclass(frozen=True)
