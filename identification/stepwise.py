@@ -208,9 +208,13 @@ def _swap_twins(
             rss = rss_s + vb[pos] ** 2 - gains  # RSS with each column in c's place
             sigma2 = rss[0] / max(n_rows - len(support), 1.0)
             n_simple = len(simple)
-            if n_simple and rss[1 : 1 + n_simple].min() - rss[0] <= F_CRITICAL * sigma2:
+            # An invalid column has infinite RSS: inf - inf compares False (no swap), quietly.
+            with np.errstate(invalid="ignore"):
+                to_simple = rss[1 : 1 + n_simple].min() - rss[0] if n_simple else np.inf
+                to_richer = rss[0] - rss[1 + n_simple :].min() if richer else -np.inf
+            if to_simple <= F_CRITICAL * sigma2:
                 swap = (pos, simple[int(np.argmin(rss[1 : 1 + n_simple]))])
-            elif richer and rss[0] - rss[1 + n_simple :].min() > F_CRITICAL * sigma2:
+            elif to_richer > F_CRITICAL * sigma2:
                 swap = (pos, richer[int(np.argmin(rss[1 + n_simple :]))])
             if swap is not None:
                 break
