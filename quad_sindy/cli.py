@@ -130,6 +130,19 @@ def _shared_reference() -> Path | None:
     return None
 
 
+def _matching_vehicle(state_names: tuple[str, ...], input_names: tuple[str, ...]) -> str | None:
+    """The registered vehicle with a library preset whose variables are exactly these."""
+    from identification.libraries import PRESETS
+
+    for name, vehicle in VEHICLES.items():
+        if name in PRESETS and (vehicle.state_names, vehicle.input_names) == (
+            tuple(state_names),
+            tuple(input_names),
+        ):
+            return name
+    return None
+
+
 @app.command()
 def identify(
     data: Annotated[list[Path], typer.Argument(help="CSV or NPZ trajectory files")],
@@ -181,6 +194,13 @@ def identify(
         if cleaning.rows_out != cleaning.rows_in or cleaning.jitter > 1e-6:
             typer.echo(f"data: {cleaning.summary()}")
         first = trajs[0]
+        if preset is None and library is None and angles is None:
+            preset = _matching_vehicle(first.state_names, first.input_names)
+            if preset is not None:
+                typer.echo(
+                    f"library: the {preset} vehicle's preset (the data's variables are its "
+                    "variables; --library or --angles choose another)"
+                )
         if method == "paper":
             from identification.experiments.paper import PAPER_LAMBDA, fit_paper
 

@@ -95,3 +95,24 @@ def test_vector_env_step_before_reset_needs_reset():
     env = gym.make("PlanarQuad-v0").unwrapped
     with pytest.raises(gym.error.ResetNeeded):
         env.step(np.zeros(2))
+
+
+def test_identify_picks_the_preset_of_a_vehicle_whose_variables_the_data_name(
+    monkeypatch, capsys, tmp_path
+):
+    from identification.data import write_trajectory_csv
+    from identification.experiments.synthetic import planar_flights
+    from identification.model import load_model
+
+    paths = []
+    for i, traj in enumerate(planar_flights()):  # a non-paper vehicle (m = 0.5 kg)
+        paths.append(str(write_trajectory_csv(tmp_path / f"f{i}.csv", traj)))
+    monkeypatch.setattr(sys, "argv", ["quad-sindy", "identify", *paths, "--out",
+                                      str(tmp_path / "m.json")])  # fmt: skip
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main()
+    out, _ = capsys.readouterr()
+    assert exit_info.value.code in (0, None)
+    assert "the planar vehicle's preset" in out
+    model = load_model(tmp_path / "m.json")
+    assert "sin(phi) u1" in model.feature_names and model.n_terms == 7
