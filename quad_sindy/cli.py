@@ -194,10 +194,11 @@ def identify(
         if cleaning.rows_out != cleaning.rows_in or cleaning.jitter > 1e-6:
             typer.echo(f"data: {cleaning.summary()}")
         first = trajs[0]
+        library_note = None
         if preset is None and library is None and angles is None:
             preset = _matching_vehicle(first.state_names, first.input_names)
             if preset is not None:
-                typer.echo(
+                library_note = (
                     f"library: the {preset} vehicle's preset (the data's variables are its "
                     "variables; --library or --angles choose another)"
                 )
@@ -220,6 +221,8 @@ def identify(
                     trajs, lib, config=config, windows=windows, system=label, progress=True
                 )
                 best = report.best
+                if library_note:
+                    typer.echo(library_note)
                 typer.echo(
                     f"selection: window {best.window}, lambda {best.lam:g}, {model.n_terms} "
                     f"terms (score {best.mean:.3g} +- {best.se:.2g}; {report.folds} folds)"
@@ -232,6 +235,8 @@ def identify(
                     config, lam=float(lam), window=1 if window == "auto" else int(window)
                 )
                 model = fit(trajs, lib, config, label)
+                if library_note:
+                    typer.echo(library_note)
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
     model.save(out)
