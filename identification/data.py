@@ -199,8 +199,9 @@ def clean(
     A row is *stale* when its time does not advance, or when its states repeat the previous
     row's exactly while the vehicle moves before and after (a logger that re-sent an old
     sample; repeats at rest are kept). A row is an *outlier* when a state is
-    further than ``outlier_z`` robust standard deviations (1.4826 MAD over the log) from
-    the straight line through its two neighbours. Dropped rows and time gaps longer than
+    further than ``outlier_z`` robust standard deviations (1.4826 MAD over the log, at least
+    1 % of the state's standard deviation) from the straight line through its two
+    neighbours. Dropped rows and time gaps longer than
     ``gap_factor`` median steps split the log, because the input held over a missing step is
     unknown; segments shorter than ``min_rows`` are dropped. Jittery steps are kept: the fit
     uses each row's own step.
@@ -240,7 +241,11 @@ def clean(
         weight = ((ts[1:-1] - ts[:-2]) / (ts[2:] - ts[:-2]))[:, None]
         resid = xs[1:-1] - ((1 - weight) * xs[:-2] + weight * xs[2:])  # off the neighbours' line
         mad = 1.4826 * np.median(np.abs(resid - np.median(resid, axis=0)), axis=0)
-        mad = np.where(mad > 0, mad, np.inf)
+        # Smooth clean data have second differences near round-off, so the MAD alone would
+        # call every control kink an outlier: a deviation must also be large next to the
+        # state's own spread (1 % of its standard deviation, or round-off of its size).
+        floor = 1e-2 * xs.std(axis=0) + 1e-12 * (1.0 + np.abs(xs).max(axis=0))
+        mad = np.maximum(mad, floor)
         step = np.diff(ts)
         near_gap = np.maximum(step[:-1], step[1:]) > gap_factor * np.median(step)
         bad = np.any(np.abs(resid) > outlier_z * mad, axis=1) & ~near_gap  # gaps split anyway
