@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from identification.features import compile_features, compile_rhs, parse_term, term_latex, term_name
-from quad_envs.fileio import write_json
+from quad_envs.fileio import jsonable, write_json
 from quad_envs.integrators import rk4_step
 from quad_envs.vehicles import get_vehicle
 
@@ -193,7 +193,7 @@ class IdentifiedModel:
             if self.inclusion_probability is None
             else self.inclusion_probability.tolist(),
             "equations": self.equations(precision=8, uncertainty=False),
-            "meta": json_safe(self.meta),
+            "meta": jsonable(self.meta),
         }
 
     @classmethod
@@ -259,19 +259,3 @@ def load_model(path: str | Path) -> IdentifiedModel:
 
 def _optional_array(value: Any) -> np.ndarray | None:
     return None if value is None else np.array(value, dtype=np.float64)
-
-
-def json_safe(obj: Any) -> Any:
-    """A copy of ``obj`` that strict JSON accepts: non-finite floats become None (null)."""
-    if isinstance(obj, dict):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return json_safe(obj.tolist())
-    if isinstance(obj, float | np.floating):
-        value = float(obj)
-        return value if np.isfinite(value) else None
-    if isinstance(obj, np.integer | np.bool_):
-        return obj.item()
-    return obj

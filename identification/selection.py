@@ -64,7 +64,8 @@ from identification.fit import (
     solve,
     solve_lambdas,
 )
-from identification.model import IdentifiedModel, json_safe
+from identification.model import IdentifiedModel
+from quad_envs.fileio import jsonable
 
 SELECT_LAMBDAS: tuple[float, ...] = tuple(float(v) for v in np.logspace(-6, 0, 13))
 """Scaled thresholds tried by default (half decades from 1e-6 to 1)."""
@@ -134,7 +135,7 @@ class SelectionReport:
 
     def to_meta(self) -> dict[str, Any]:
         """JSON-safe summary (non-finite scores become null)."""
-        return json_safe(
+        return jsonable(
             {
                 "rule": self.rule,
                 "folds": self.folds,

@@ -178,7 +178,7 @@ def run(
         },
         "authors_file": authors,
     }
-    write_json(out / "metrics.json", _jsonable(metrics))
+    write_json(out / "metrics.json", metrics)
     atomic_write_text(out / "report.md", _report(metrics, comps, lib))
     if TALLY.summary():
         echo(TALLY.summary())
@@ -202,19 +202,6 @@ def _plot_scans(
         secondary={"terms": terms},
         secondary_label="non-zero terms",
     )
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float | np.floating):
-        value = float(obj)
-        return value if np.isfinite(value) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    return obj
 
 
 def _report(metrics: dict, comps: dict, lib: list[str]) -> str:
