@@ -17,6 +17,7 @@ from identification.libraries import (
 )
 from identification.model import IdentifiedModel
 from quad_envs.dynamics import planar_drag
+from quad_envs.integrators import rk4_step
 
 STATES = ("y", "z", "phi", "y_dot", "z_dot", "phi_dot")
 INPUTS = ("u1", "u2")
@@ -162,3 +163,73 @@ def test_compiled_point_code_handles_abs_and_norm() -> None:
         x, u, out = rng.normal(size=6), rng.normal(size=2), np.empty(6)
         namespace["point"](x, u, out)
         np.testing.assert_allclose(out, model.rhs(x, u), rtol=1e-12, atol=1e-12)
+
+
+# -- 6-DOF ---------------------------------------------------------------------------------
+
+
+def _truth_rhs(truth: dict, states: tuple, inputs: tuple):  # noqa: ANN202
+    names = list(dict.fromkeys(t for terms in truth.values() for t in terms))
+    coef = np.array([[truth.get(s, {}).get(n, 0.0) for n in names] for s in states])
+    return compile_rhs(names, coef, states, inputs)
+
+
+def test_6dof_drag_truth_is_the_hand_computed_body_drag() -> None:
+    params = d.OTHER_VEHICLE_6DOF
+    truth = d.quad6dof_drag_truth_terms(params)
+    m = params.mass
+    assert truth["u"] == pytest.approx({"u": -0.09 / m, "u norm(u v w)": -0.012 / m})
+    assert truth["v"] == pytest.approx({"v": -0.09 / m, "norm(u v w) v": -0.012 / m})
+    assert truth["w"] == pytest.approx({"w": -0.03 / m, "norm(u v w) w": -0.02 / m})
+    pelican = d.quad6dof_drag_truth_terms(d.quad6dof_params("pelican"))
+    assert "w" not in pelican["w"]  # no linear drag along the Pelican's thrust axis
+
+
+def test_6dof_rotor_library_holds_the_truth_and_no_collective_input() -> None:
+    library = d.quad6dof_rotor_library()
+    assert len(library) == 699 and len(set(library)) == 699
+    assert not any(set(n.split()) & {"u1", "u2", "u3", "u4"} for n in library)
+    for vehicle in ("crazyflie", "pelican"):  # X and + frames
+        truth = d.quad6dof_effects_truth(d.quad6dof_params(vehicle), rotors=True)
+        assert {t for terms in truth.values() for t in terms} <= set(library)
+
+
+@pytest.mark.parametrize("vehicle", ["crazyflie", "pelican"])
+def test_6dof_truth_steps_like_the_env(vehicle: str) -> None:
+    """The scoring truth (drag and rotor lag on) reproduces the env's recorded steps."""
+    params = d.quad6dof_params(vehicle)
+    flights = d.quad6dof_flights(params, episodes=1, steps=120, drag=True, rotor_dynamics=True)
+    tr = flights.observed[0]
+    assert len(tr) == 120
+    truth = d.quad6dof_effects_truth(params, drag=True, rotors=True)
+    rhs = _truth_rhs(truth, tr.state_names, tr.input_names)
+    x, u = np.asarray(tr.x), np.asarray(tr.u)
+    stepped = rk4_step(rhs, x[:-1], u[:-1], 0.01)
+    scale = np.abs(x).max(axis=0) + 1e-3
+    assert np.abs((stepped - x[1:]) / scale).max() < 1e-9
+
+
+def test_6dof_flights_fly_moderate_tilts() -> None:
+    flights = d.quad6dof_flights("crazyflie", episodes=2, steps=400, drag=True)
+    assert [len(t) for t in flights.hidden] == [400, 400]
+    tilt, rms = d.max_tilt(flights.hidden)
+    assert 0.15 < tilt < 0.6 and 0.05 < rms < 0.25
+    psi = np.concatenate([np.asarray(t.x)[:, 5] for t in flights.hidden])
+    assert np.ptp(psi) > 1.0  # the yaw sweep moves the yaw's trig factors
+
+
+@pytest.mark.slow
+def test_6dof_drag_coefficients_within_2_percent() -> None:
+    result = d.drag6_study("pelican", episodes=3, steps=600, n_models=0, windows=(1,))
+    assert result.support.exact_support, result.support
+    assert result.worst_drag_error < 0.02
+    for true, found in result.physical.values():
+        assert abs(found - true) <= 0.02 * abs(true) + 1e-6
+
+
+@pytest.mark.slow
+def test_6dof_rotor_time_constant_within_2_percent() -> None:
+    result = d.rotor6_study(d.OTHER_VEHICLE_6DOF, episodes=3, steps=600, n_models=0,
+                            windows=(1,))  # fmt: skip
+    assert result.worst_tau_error < 0.02, result.tau_found
+    assert not result.support.missed

@@ -34,16 +34,30 @@ import numpy as np
 
 import quad_envs  # noqa: F401 (registers the ids)
 from identification.data import Trajectory
-from identification.experiments.synthetic import SupportCheck, check_support
+from identification.experiments.synthetic import SupportCheck, add_noise, check_support
+from identification.experiments.truth import quad6dof_truth
 from identification.features import compile_features, parse_term, term_name
-from identification.libraries import LibrarySpec, drag_terms, planar_drag_library, planar_library
+from identification.libraries import (
+    LibrarySpec,
+    drag_terms,
+    planar_drag_library,
+    planar_library,
+    quad6dof_drag_library,
+    quad6dof_library,
+)
 from identification.model import IdentifiedModel
 from identification.rollouts import excitation_rollouts
 from identification.selection import select_model
-from quad_envs.controllers import PlanarPD, PlanarPDGains
-from quad_envs.dynamics import planar_drag, planar_rhs
+from quad_envs.controllers import PlanarPD, PlanarPDGains, Quad6DOFPD, Quad6DOFPDGains
+from quad_envs.dynamics import (
+    QUAD6DOF_INPUT_NAMES,
+    QUAD6DOF_STATE_NAMES,
+    body_drag,
+    planar_drag,
+    planar_rhs,
+)
 from quad_envs.integrators import rk4_step
-from quad_envs.params import PlanarQuadParams, get_preset
+from quad_envs.params import PlanarQuadParams, Quad6DOFParams, get_preset
 from quad_envs.trajectories import RandomWaypoints
 
 ENV_ID = "PlanarQuad-v0"
@@ -222,6 +236,7 @@ def rotor_flights(
         for _ in range(steps):
             command = unmix @ pd(info["state"], info["reference"])
             command = np.clip(command + noise * half * rng.standard_normal(2), low, high)
+            command = command.astype(env.action_space.dtype).astype(float)  # what is applied
             ts.append(info["time"])
             xs.append(info["state"])
             thrusts.append(info["rotor_thrusts"] if rotor_dynamics else command)
@@ -279,6 +294,7 @@ class DragResult:
             recovered from the found term coefficients and the found 1/m.
         seconds: Wall time of the identification.
         rows_of_data: Rows of data used.
+        sigma: Standard deviation of the state noise added to the data (0: clean).
     """
 
     vehicle: str
@@ -288,6 +304,7 @@ class DragResult:
     physical: dict[str, tuple[float, float]]
     seconds: float
     rows_of_data: int
+    sigma: float = 0.0
 
     @property
     def worst_drag_error(self) -> float:
@@ -295,14 +312,36 @@ class DragResult:
         return max(r.rel_error for r in self.rows)
 
 
-def _drag_jacobian(params: PlanarQuadParams, keys: list[tuple[str, str]]) -> np.ndarray:
-    """d(term coefficients)/d(drag field / m): the terms are linear in the four drag fields."""
+def _drag_jacobian(params: Any, keys: list[tuple[str, str]], truth_terms: Any = None) -> np.ndarray:
+    """d(term coefficients)/d(drag field / m): the terms are linear in the four drag fields.
+
+    ``truth_terms`` maps parameters to {state: {term: coefficient}} (default: the planar
+    :func:`drag_truth_terms`).
+    """
+    truth_terms = truth_terms or drag_truth_terms
     cols = []
     for name in DRAG_FIELDS:
         unit = params.replace(**{f: 0.0 for f in DRAG_FIELDS}).replace(**{name: params.mass})
-        truth = drag_truth_terms(unit)
+        truth = truth_terms(unit)
         cols.append([truth[s].get(t, 0.0) for s, t in keys])
     return np.array(cols).T
+
+
+def _physical_drag(
+    params: Any,
+    model: IdentifiedModel,
+    keys: list[tuple[str, str]],
+    mass_found: float,
+    truth_terms: Any = None,
+) -> dict[str, tuple[float, float]]:
+    """{drag field: (true, found)}: least squares of the found term coefficients times m."""
+    jac = _drag_jacobian(params, keys, truth_terms)
+    found = np.array([coefficient(model, s, t) for s, t in keys])
+    per_mass, *_ = np.linalg.lstsq(jac, found, rcond=None)
+    return {
+        name: (float(getattr(params, name)), float(per_mass[k] * mass_found))
+        for k, name in enumerate(DRAG_FIELDS)
+    }
 
 
 def drag_study(
@@ -312,10 +351,17 @@ def drag_study(
     seed: int = 0,
     n_models: int = 20,
     label: str | None = None,
+    sigma: float = 0.0,
 ) -> DragResult:
-    """Identifies the planar vehicle with drag on from its flights alone and scores it."""
+    """Identifies the planar vehicle with drag on from its flights alone and scores it.
+
+    ``sigma``: standard deviation of Gaussian noise added to every recorded state (sensor
+    noise, seeded by ``seed + 7``; the inputs stay clean).
+    """
     params = planar_params(vehicle)
     trajs = drag_flights(params, episodes, steps, seed)
+    if sigma > 0:
+        trajs = add_noise(trajs, sigma, seed + 7)
     start = time.perf_counter()
     model, _ = select_model(trajs, planar_drag_library(), n_models=n_models, seed=seed)
     seconds = time.perf_counter() - start
@@ -328,17 +374,12 @@ def drag_study(
     ]
     # Physical coefficients from all term coefficients (least squares), scaled by found m.
     keys = [(s, t) for s in ("y_dot", "z_dot") for t in drag_terms(VELOCITIES, "phi")]
-    jac = _drag_jacobian(params, keys)
-    found = np.array([coefficient(model, s, t) for s, t in keys])
-    per_mass, *_ = np.linalg.lstsq(jac, found, rcond=None)
     mass_found = -1.0 / coefficient(model, "y_dot", "u1 sin(phi)")
-    physical = {
-        name: (float(getattr(params, name)), float(per_mass[k] * mass_found))
-        for k, name in enumerate(DRAG_FIELDS)
-    }
+    physical = _physical_drag(params, model, keys, mass_found)
     return DragResult(
         label or (vehicle if isinstance(vehicle, str) else "custom"), model,
         check_support(model, truth), rows, physical, seconds, sum(len(t) for t in trajs),
+        sigma,
     )  # fmt: skip
 
 
@@ -355,6 +396,7 @@ class RotorResult:
             1/coef of Tc_i in the equation of T_i [s].
         seconds: Wall time of the identification.
         rows_of_data: Rows of data used.
+        sigma: Standard deviation of the state noise added to the data (0: clean).
     """
 
     vehicle: str
@@ -364,6 +406,7 @@ class RotorResult:
     tau_found: dict[str, float]
     seconds: float
     rows_of_data: int
+    sigma: float = 0.0
 
     @property
     def worst_tau_error(self) -> float:
@@ -389,11 +432,17 @@ def rotor_study(
     n_models: int = 20,
     flights: RotorFlights | None = None,
     label: str | None = None,
+    sigma: float = 0.0,
 ) -> RotorResult:
-    """Identifies the time constant from flights with the rotor thrusts observed."""
+    """Identifies the time constant from flights with the rotor thrusts observed.
+
+    ``sigma``: standard deviation of Gaussian noise added to every recorded state, the rotor
+    thrusts included (seeded by ``seed + 7``; the commanded thrusts stay clean).
+    """
     params = planar_params(vehicle)
     flights = flights or rotor_flights(params, episodes, steps, seed)
-    model, seconds = identify_rotors(flights.observed, n_models, seed)
+    observed = add_noise(flights.observed, sigma, seed + 7) if sigma > 0 else flights.observed
+    model, seconds = identify_rotors(observed, n_models, seed)
     tau_found = {}
     for t, tc in zip(ROTOR_STATES, ROTOR_INPUTS, strict=True):
         tau_found[f"{t} from {t}"] = -1.0 / coefficient(model, t, t)
@@ -401,7 +450,7 @@ def rotor_study(
     return RotorResult(
         label or (vehicle if isinstance(vehicle, str) else "custom"), model,
         check_support(model, planar_truth(params, rotors=True)), params.rotor_time_constant,
-        tau_found, seconds, sum(len(t) for t in flights.observed),
+        tau_found, seconds, sum(len(t) for t in flights.observed), sigma,
     )  # fmt: skip
 
 
@@ -554,15 +603,18 @@ def plot_drift(result: DriftResult, path: str) -> None:
 
 def drag_table(results: Sequence[DragResult]) -> str:
     """Markdown: per vehicle, support, worst drag-term error and the physical coefficients."""
+    noisy = any(r.sigma > 0 for r in results)
     lines = [
-        "| vehicle | rows | time [s] | terms | missed | spurious | worst drag-term err | "
+        "| vehicle | " + ("sigma | " if noisy else "") + "rows | time [s] | terms | missed | "
+        "spurious | worst drag-term err | "
         "D_xy true / found | D_z true / found | c_xy true / found | c_z true / found |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if noisy else ""),
     ]
     for r in results:
         phys = " | ".join(f"{t:.4g} / {f:.4g}" for t, f in r.physical.values())
+        sigma = f"{r.sigma:g} | " if noisy else ""
         lines.append(
-            f"| {r.vehicle} | {r.rows_of_data} | {r.seconds:.1f} | {r.support.n_terms} | "
+            f"| {r.vehicle} | {sigma}{r.rows_of_data} | {r.seconds:.1f} | {r.support.n_terms} | "
             f"{len(r.support.missed)} | {len(r.support.spurious)} | {r.worst_drag_error:.1e} | "
             f"{phys} |"
         )
@@ -582,19 +634,36 @@ def drag_terms_table(result: DragResult) -> str:
 
 def rotor_table(results: Sequence[RotorResult]) -> str:
     """Markdown: per vehicle, support and the four estimates of tau."""
+    noisy = any(r.sigma > 0 for r in results)
     lines = [
-        "| vehicle | rows | time [s] | terms | missed | spurious | tau true [s] | "
-        "tau found [s] (T1, T2 from T_i; from Tc_i) | worst tau err |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| vehicle | " + ("sigma | " if noisy else "") + "rows | time [s] | terms | missed | "
+        "spurious | tau true [s] | tau found [s] (from T_i; from Tc_i) | worst tau err |",
+        "|---|---|---|---|---|---|---|---|---|" + ("---|" if noisy else ""),
     ]
     for r in results:
-        found = ", ".join(f"{v:.6g}" for v in r.tau_found.values())
+        from_t = [v for k, v in r.tau_found.items() if "from T" in k and "from Tc" not in k]
+        from_tc = [v for k, v in r.tau_found.items() if "from Tc" in k]
+        found = (
+            ", ".join(f"{v:.6g}" for v in from_t) + "; " + ", ".join(f"{v:.6g}" for v in from_tc)
+        )
+        sigma = f"{r.sigma:g} | " if noisy else ""
         lines.append(
-            f"| {r.vehicle} | {r.rows_of_data} | {r.seconds:.1f} | {r.support.n_terms} | "
+            f"| {r.vehicle} | {sigma}{r.rows_of_data} | {r.seconds:.1f} | {r.support.n_terms} | "
             f"{len(r.support.missed)} | {len(r.support.spurious)} | {r.tau_true:.4g} | "
             f"{found} | {r.worst_tau_error:.1e} |"
         )
     return "\n".join(lines)
+
+
+def support_lines(result: DragResult | RotorResult, limit: int = 12) -> str:
+    """The missed and spurious terms of a result, one line each (at most ``limit`` each)."""
+    out = []
+    for kind, terms in (("missed", result.support.missed), ("spurious", result.support.spurious)):
+        shown = list(terms[:limit]) + (
+            [f"... {len(terms) - limit} more"] if len(terms) > limit else []
+        )
+        out.append(f"{result.vehicle}, {kind} ({len(terms)}): " + ("; ".join(shown) or "none"))
+    return "\n".join(out)
 
 
 def drift_table(result: DriftResult) -> str:
@@ -606,3 +675,268 @@ def drift_table(result: DriftResult) -> str:
             cells = " | ".join(f"{v:.2g}" for v in err[key])
             lines.append(f"| {label} | {key} [{unit}] | {cells} |")
     return "\n".join(lines)
+
+
+# -- 6-DOF ---------------------------------------------------------------------------------
+
+ENV_6DOF = "Quad6DOF-v0"
+BODY_VELOCITIES = ("u", "v", "w")
+ROTOR_STATES_6DOF = ("T1", "T2", "T3", "T4")
+ROTOR_INPUTS_6DOF = ("Tc1", "Tc2", "Tc3", "Tc4")
+OTHER_VEHICLE_6DOF = Quad6DOFParams(
+    mass=0.6, Jxx=4e-3, Jyy=5e-3, Jzz=8e-3, arm_length=0.15, gamma=0.012,
+    rotor_force_max=0.6 * 9.81 / 4 * 2.4, frame="+", rotor_time_constant=0.04,
+    drag_linear_xy=0.09, drag_linear_z=0.03, drag_quadratic_xy=0.012, drag_quadratic_z=0.02,
+)  # fmt: skip
+"""A third 6-DOF vehicle, neither preset nor the paper's: 0.6 kg, '+' frame, unequal drag
+along body z and in the rotor plane, tau = 0.04 s, thrust-to-weight 2.4."""
+GAINS_6DOF = Quad6DOFPDGains(
+    kp_xy=2.0, kv_xy=2.5, kp_z=16.0, kv_z=8.0, kp_att=(80.0, 80.0, 10.0),
+    kv_att=(16.0, 16.0, 4.0),
+)  # fmt: skip
+"""PD gains of the 6-DOF flights (drag and rotor lag alike): the default attitude loop
+(300, 30) and position loop (20, 8) lose the Crazyflie (tau 0.072 s) and the third vehicle
+within 0.5 to 3 s once the rotors lag; the yaw loop is soft so that the yaw sweep does not
+saturate the rotors (the yaw moment arm gamma is 2 mm on the Crazyflie)."""
+SPAN_6DOF = 0.5
+"""Half-width of the waypoint box [m] (z: half of it around 1 m): tilts up to about 0.45 rad
+(RMS about 0.12 rad) with 1.5 s segments and the input noise."""
+
+
+def quad6dof_params(vehicle: str | Quad6DOFParams) -> Quad6DOFParams:
+    """A 6-DOF parameter set from a preset name or itself."""
+    if isinstance(vehicle, Quad6DOFParams):
+        return vehicle
+    return get_preset(vehicle, "quad6dof")  # type: ignore[return-value]
+
+
+def quad6dof_flights(
+    vehicle: str | Quad6DOFParams = "crazyflie",
+    episodes: int = 4,
+    steps: int = 1000,
+    seed: int = 0,
+    noise: float = 0.1,
+    drag: bool = False,
+    rotor_dynamics: bool = False,
+    gains: Quad6DOFPDGains = GAINS_6DOF,
+    span: float = SPAN_6DOF,
+) -> RotorFlights:
+    """6-DOF PD flights between random waypoints with a yaw sweep, per-rotor action mode.
+
+    The PD's collective command is split into rotor thrusts (M^-1 u), Gaussian noise of
+    ``noise`` times the half-width of the rotor box is added per rotor and the command is
+    clipped to the box and rounded to the action space's dtype (what the env applies). The
+    yaw reference sweeps +-1 rad (period 10 s + episode) so that the yaw's trig factors vary.
+
+    Returns:
+        ``observed``: the 12 rigid-body states plus T1..T4 (the commands when the rotors do not
+        lag), inputs Tc1..Tc4; ``hidden``: the 12 states, inputs [u1..u4] = M Tc (the applied
+        collective input when the rotors do not lag).
+    """
+    params = quad6dof_params(vehicle)
+    env = gym.make(
+        ENV_6DOF,
+        params=params,
+        effects={"drag": drag, "rotor_dynamics": rotor_dynamics},
+        action_mode="rotor_thrusts",
+        duration=steps * 0.01 + 1.0,
+    )
+    pd = Quad6DOFPD(params, gains)
+    mixer = params.mixer
+    unmix = np.linalg.inv(mixer)
+    low, high = env.action_space.low.astype(float), env.action_space.high.astype(float)
+    half = 0.5 * (high - low)
+    rng = np.random.default_rng(seed)
+    observed, hidden = [], []
+    for ep in range(episodes):
+        ref = RandomWaypoints.sample(
+            rng, ndim=3, num_waypoints=int(steps * 0.01 / 1.5) + 2,
+            low=(-span, -span, 1.0 - 0.5 * span), high=(span, span, 1.0 + 0.5 * span),
+            segment_time=1.5, yaw_amplitude=1.0, yaw_period=10.0 + ep,
+        )  # fmt: skip
+        _, info = env.reset(seed=seed + ep, options={"trajectory": ref})
+        ts, xs, thrusts, commands = [], [], [], []
+        for _ in range(steps):
+            command = unmix @ pd(info["state"], info["reference"])
+            command = np.clip(command + noise * half * rng.standard_normal(4), low, high)
+            command = command.astype(env.action_space.dtype).astype(float)  # what is applied
+            ts.append(info["time"])
+            xs.append(info["state"])
+            thrusts.append(info["rotor_thrusts"] if rotor_dynamics else command)
+            commands.append(command)
+            _, _, terminated, truncated, info = env.step(command.astype(env.action_space.dtype))
+            if terminated or truncated:
+                break
+        if len(ts) < 50:
+            continue
+        t, x, tc = np.array(ts), np.array(xs), np.array(commands)
+        meta = {"env": ENV_6DOF, "seed": seed + ep, "drag": drag, "rotor_dynamics": rotor_dynamics}
+        observed.append(
+            Trajectory(
+                t,
+                np.hstack([x, np.array(thrusts)]),
+                tc,
+                (*QUAD6DOF_STATE_NAMES, *ROTOR_STATES_6DOF),
+                ROTOR_INPUTS_6DOF,
+                meta=meta,
+            )  # fmt: skip
+        )
+        hidden.append(
+            Trajectory(t, x, tc @ mixer.T, QUAD6DOF_STATE_NAMES, QUAD6DOF_INPUT_NAMES, meta=meta)
+        )
+    env.close()
+    return RotorFlights(observed, hidden)
+
+
+def max_tilt(trajs: Sequence[Trajectory]) -> tuple[float, float]:
+    """(largest, RMS) of |phi| and |theta| over the flights [rad]."""
+    angles = np.vstack([np.asarray(tr.x)[:, 3:5] for tr in trajs])
+    return float(np.abs(angles).max()), float(np.sqrt(np.mean(angles**2)))
+
+
+def quad6dof_drag_truth_terms(params: Quad6DOFParams) -> dict[str, dict[str, float]]:
+    """True coefficients of the drag terms in the u, v, w equations.
+
+    The acceleration F(v) / m of :func:`quad_envs.dynamics.body_drag` is fitted by least
+    squares on 400 random body velocities with the terms of ``drag_terms(("u", "v", "w"))``;
+    the residual must be at rounding level, else this raises.
+    """
+    names = drag_terms(BODY_VELOCITIES)
+    rng = np.random.default_rng(0)
+    n = 400
+    vel = rng.uniform(-3.0, 3.0, (n, 3))
+    force = body_drag(
+        vel[:, 0], vel[:, 1], vel[:, 2], params.drag_linear_xy, params.drag_linear_z,
+        params.drag_quadratic_xy, params.drag_quadratic_z,
+    )  # fmt: skip
+    acc = np.stack(force, axis=1) / params.mass
+    x = np.zeros((n, 12))
+    x[:, 6:9] = vel
+    theta = compile_features(names, QUAD6DOF_STATE_NAMES, QUAD6DOF_INPUT_NAMES)(x, np.zeros((n, 4)))
+    coef, *_ = np.linalg.lstsq(theta, acc, rcond=None)
+    residual = np.abs(theta @ coef - acc).max()
+    if residual > 1e-9 * max(np.abs(acc).max(), 1e-12):
+        raise AssertionError(f"drag terms do not span the body drag (residual {residual:.2e})")
+    scale = np.abs(coef).max()
+    out: dict[str, dict[str, float]] = {v: {} for v in BODY_VELOCITIES}
+    for j, name in enumerate(names):
+        for i, state in enumerate(BODY_VELOCITIES):
+            if abs(coef[j, i]) > 1e-9 * max(scale, 1e-300):
+                out[state][name] = float(coef[j, i])
+    return out
+
+
+def quad6dof_effects_truth(
+    params: Quad6DOFParams, drag: bool = False, rotors: bool = False
+) -> dict[str, dict[str, float]]:
+    """The true 6-DOF model {state: {term: coefficient}} with drag and/or rotor lag.
+
+    With ``rotors`` the inputs u = M T enter through the rotor thrusts T1..T4 (states) and
+    T_i' = (Tc_i - T_i) / tau.
+    """
+    truth = {k: dict(v) for k, v in quad6dof_truth(params).items()}
+    if rotors:
+        mixer, tau = params.mixer, params.rotor_time_constant
+        scale = {"w": 1.0 / params.mass, "p": 1.0 / params.Jxx, "q": 1.0 / params.Jyy,
+                 "r": 1.0 / params.Jzz}  # fmt: skip
+        for row, (state, inp) in enumerate(
+            zip(("w", "p", "q", "r"), QUAD6DOF_INPUT_NAMES, strict=True)
+        ):
+            del truth[state][inp]
+            for i, rotor in enumerate(ROTOR_STATES_6DOF):
+                if mixer[row, i] != 0.0:
+                    truth[state][rotor] = float(mixer[row, i] * scale[state])
+        for t, tc in zip(ROTOR_STATES_6DOF, ROTOR_INPUTS_6DOF, strict=True):
+            truth[t] = {t: -1.0 / tau, tc: 1.0 / tau}
+    if drag:
+        for state, terms in quad6dof_drag_truth_terms(params).items():
+            truth[state].update(terms)
+    return {  # a symmetric vehicle (Jxx = Jyy) has no p q term in r'
+        s: {term_name(parse_term(n)): v for n, v in t.items() if v != 0.0} for s, t in truth.items()
+    }
+
+
+def quad6dof_rotor_library() -> list[str]:
+    """The 6-DOF preset library with the rotor thrusts and commands in the inputs' place.
+
+    Every term of :func:`identification.libraries.quad6dof_library` that holds an input
+    (u1..u4) is replaced by the same trig product times each of T1..T4 and Tc1..Tc4; the
+    rest is kept: 339 + 45 x 8 = 699 terms, the same candidates per variable as the preset.
+    """
+    import re
+
+    variables = (*QUAD6DOF_STATE_NAMES, *ROTOR_STATES_6DOF, *ROTOR_INPUTS_6DOF)
+    names: list[str] = []
+    for name in quad6dof_library():
+        held = re.findall(r"\bu[1-4]\b", name)
+        if not held:
+            names.append(name)
+        elif held == ["u1"]:
+            for rotor in (*ROTOR_STATES_6DOF, *ROTOR_INPUTS_6DOF):
+                names.append(re.sub(r"\bu1\b", rotor, name))
+    return list(dict.fromkeys(term_name(parse_term(n, variables)) for n in names))
+
+
+def drag6_study(
+    vehicle: str | Quad6DOFParams = "crazyflie",
+    episodes: int = 4,
+    steps: int = 1000,
+    seed: int = 0,
+    n_models: int = 20,
+    label: str | None = None,
+    windows: Sequence[int] | None = None,
+) -> DragResult:
+    """Identifies the 6-DOF vehicle with drag on from its flights alone (``quad6dof_drag``).
+
+    ``windows``: integral windows of the selection (None: its default).
+    """
+    params = quad6dof_params(vehicle)
+    trajs = quad6dof_flights(params, episodes, steps, seed, drag=True).hidden
+    kwargs: dict[str, Any] = {} if windows is None else {"windows": tuple(windows)}
+    start = time.perf_counter()
+    model, _ = select_model(trajs, quad6dof_drag_library(), n_models=n_models, seed=seed,
+                            **kwargs)  # fmt: skip
+    seconds = time.perf_counter() - start
+    drag = quad6dof_drag_truth_terms(params)
+    rows = [
+        CoefficientRow(s, term_name(parse_term(t)), v, coefficient(model, s, t))
+        for s, terms in drag.items()
+        for t, v in terms.items()
+    ]
+    keys = [(s, t) for s in BODY_VELOCITIES for t in drag_terms(BODY_VELOCITIES)]
+    mass_found = 1.0 / coefficient(model, "w", "u1")
+    physical = _physical_drag(params, model, keys, mass_found, quad6dof_drag_truth_terms)
+    return DragResult(
+        label or (vehicle if isinstance(vehicle, str) else "custom"), model,
+        check_support(model, quad6dof_effects_truth(params, drag=True)), rows, physical,
+        seconds, sum(len(t) for t in trajs),
+    )  # fmt: skip
+
+
+def rotor6_study(
+    vehicle: str | Quad6DOFParams = "crazyflie",
+    episodes: int = 4,
+    steps: int = 1000,
+    seed: int = 0,
+    n_models: int = 20,
+    label: str | None = None,
+    windows: Sequence[int] | None = None,
+) -> RotorResult:
+    """Identifies tau of the 6-DOF vehicle with the four rotor thrusts observed."""
+    params = quad6dof_params(vehicle)
+    flights = quad6dof_flights(params, episodes, steps, seed, noise=0.05, rotor_dynamics=True)
+    kwargs: dict[str, Any] = {} if windows is None else {"windows": tuple(windows)}
+    start = time.perf_counter()
+    model, _ = select_model(flights.observed, quad6dof_rotor_library(), n_models=n_models,
+                            seed=seed, **kwargs)  # fmt: skip
+    seconds = time.perf_counter() - start
+    tau_found = {}
+    for t, tc in zip(ROTOR_STATES_6DOF, ROTOR_INPUTS_6DOF, strict=True):
+        tau_found[f"{t} from {t}"] = -1.0 / coefficient(model, t, t)
+        tau_found[f"{t} from {tc}"] = 1.0 / coefficient(model, t, tc)
+    return RotorResult(
+        label or (vehicle if isinstance(vehicle, str) else "custom"), model,
+        check_support(model, quad6dof_effects_truth(params, rotors=True)),
+        params.rotor_time_constant, tau_found, seconds,
+        sum(len(t) for t in flights.observed),
+    )  # fmt: skip
