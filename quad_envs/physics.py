@@ -37,7 +37,7 @@ Effects (:class:`Effects`), each off by default; units SI, frames as in
   termination use the true state.
 
 Random numbers (gusts, observation noise) come from a counter-based generator per member
-(splitmix64, normals in pairs by Marsaglia's polar method) whose seed each episode draws
+(splitmix64; normals by a 256-layer ziggurat, as numpy's) whose seed each episode draws
 from the env's ``np_random``: reproducible per seed, the same in the single and the vector
 env.
 """
@@ -280,45 +280,104 @@ def pack_consts(
     return c
 
 
-# -- random numbers (splitmix64 + Marsaglia's polar method), per member ---------------------
+# -- random numbers (splitmix64 + a ziggurat), per member --------------------------------
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
 
 
+def _ziggurat_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Tables of the 256-layer ziggurat for N(0, 1) (Marsaglia and Tsang 2000, as numpy's).
+
+    Layer i >= 1 is the box [0, x_i) x [f(x_i), f(x_{i-1})] under f(x) = exp(-x^2 / 2)
+    (x_0 = 0, x_255 = r); layer 0 is [0, v / f(r)) x [0, f(r)], the base strip plus the
+    tail beyond r. Every layer has the area v. Returns (k, w, f, r): a 52-bit magnitude m
+    drawn in layer i gives x = m w_i, inside the curve for sure if m < k_i.
+    """
+    r = 3.6541528853610088  # x_255 for 256 layers
+    density = lambda x: math.exp(-0.5 * x * x)  # noqa: E731
+    v = r * density(r) + math.sqrt(math.pi / 2) * math.erfc(r / math.sqrt(2))
+    scale = 2.0**52
+    k, w, f = np.zeros(256, np.uint64), np.zeros(256), np.zeros(256)
+    q = v / density(r)
+    k[0], k[1] = int(r / q * scale), 0
+    w[0], w[255] = q / scale, r / scale
+    f[0], f[255] = 1.0, density(r)
+    x_outer = r
+    for i in range(254, 0, -1):
+        x_inner = math.sqrt(-2.0 * math.log(v / x_outer + density(x_outer)))
+        k[i + 1] = int(x_inner / x_outer * scale)
+        f[i], w[i] = density(x_inner), x_inner / scale
+        x_outer = x_inner
+    return k, w, f, r
+
+
+_ZIG_K, _ZIG_W, _ZIG_F, _ZIG_R = _ziggurat_tables()
+
+
 @numba.njit(cache=True, inline="always")
-def _next_uniform(rng: Any, i: int) -> float:
+def _next_bits(rng: Any, i: int) -> Any:
+    """The next 64 random bits of member i (splitmix64: a counter, then a mixer)."""
     z = rng[i] + _GOLDEN
     rng[i] = z
     z = (z ^ (z >> np.uint64(30))) * _MIX1
     z = (z ^ (z >> np.uint64(27))) * _MIX2
-    z = z ^ (z >> np.uint64(31))
-    return (float(z >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)  # in (0, 1)
+    return z ^ (z >> np.uint64(31))
 
 
 @numba.njit(cache=True, inline="always")
-def _next_normal_pair(rng: Any, i: int) -> tuple[float, float]:
-    """Two independent standard normals (Marsaglia's polar method: no trigonometry)."""
+def _next_uniform(rng: Any, i: int) -> float:
+    """A uniform number in (0, 1) for member i."""
+    top53 = np.int64(_next_bits(rng, i) >> np.uint64(11))
+    return (float(top53) + 0.5) * (1.0 / 9007199254740992.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _normal_rare(rng: Any, i: int, bits: Any, x: float) -> float:
+    """The ziggurat's rare branches (~1 % of draws): the tail, a wedge, or a new draw."""
     while True:
-        a = 2.0 * _next_uniform(rng, i) - 1.0
-        b = 2.0 * _next_uniform(rng, i) - 1.0
-        s = a * a + b * b
-        if 0.0 < s < 1.0:
-            break
-    scale = math.sqrt(-2.0 * math.log(s) / s)
-    return a * scale, b * scale
+        layer = int(bits & np.uint64(0xFF))
+        if layer == 0:  # the tail beyond r (Marsaglia's exponential rejection)
+            while True:
+                tail = -math.log(_next_uniform(rng, i)) / _ZIG_R
+                if -2.0 * math.log(_next_uniform(rng, i)) > tail * tail:
+                    return -(_ZIG_R + tail) if x < 0.0 else _ZIG_R + tail
+        height = _ZIG_F[layer] + _next_uniform(rng, i) * (_ZIG_F[layer - 1] - _ZIG_F[layer])
+        if height < math.exp(-0.5 * x * x):
+            return x
+        bits = _next_bits(rng, i)
+        magnitude = (bits >> np.uint64(9)) & np.uint64(0xFFFFFFFFFFFFF)
+        layer = int(bits & np.uint64(0xFF))
+        x = float(np.int64(magnitude)) * _ZIG_W[layer]
+        if bits & np.uint64(0x100):
+            x = -x
+        if magnitude < _ZIG_K[layer]:
+            return x
+
+
+@numba.njit(cache=True, inline="always")
+def _next_normal(rng: Any, i: int) -> float:
+    """A standard normal for member i: one 64-bit draw and a table look-up ~99 % of the time.
+
+    Bits 0-7 pick the layer, bit 8 the sign, bits 9-60 the magnitude (as numpy's ziggurat).
+    """
+    bits = _next_bits(rng, i)
+    magnitude = (bits >> np.uint64(9)) & np.uint64(0xFFFFFFFFFFFFF)
+    layer = int(bits & np.uint64(0xFF))
+    x = float(np.int64(magnitude)) * _ZIG_W[layer]
+    if bits & np.uint64(0x100):
+        x = -x
+    if magnitude < _ZIG_K[layer]:
+        return x
+    return _normal_rare(rng, i, bits, x)
 
 
 @numba.njit(cache=True, inline="always")
 def _add_noise(rng: Any, i: int, scale: float, values: Any) -> None:
     """Adds ``scale`` times independent standard normals to every entry of ``values``."""
-    n = values.shape[0]
-    for j in range(0, n, 2):
-        z0, z1 = _next_normal_pair(rng, i)
-        values[j] += scale * z0
-        if j + 1 < n:
-            values[j + 1] += scale * z1
+    for j in range(values.shape[0]):
+        values[j] += scale * _next_normal(rng, i)
 
 
 # -- shared pieces of the kernels (inlined into them) ------------------------------------

@@ -141,6 +141,50 @@ def test_sensor_bias_is_constant_and_delay_shifts_whole_steps():
     np.testing.assert_array_equal(delayed_obs[:3], np.broadcast_to(clean_obs[0], (3, 10)))
 
 
+def test_kernel_normals_are_standard_normal_including_the_tails():
+    import numba
+    from scipy import stats
+
+    from quad_envs import physics
+
+    @numba.njit
+    def draw(n, seed):
+        rng = np.array([seed], dtype=np.uint64)
+        out = np.zeros(n)
+        physics._add_noise(rng, 0, 1.0, out)
+        return out
+
+    z = draw(2_000_000, 2024)
+    assert stats.kstest(z, "norm").pvalue > 1e-3
+    # Every region of the ziggurat: the boxes, the wedges (chi-square over fine bins) and
+    # the tail beyond r = 3.654 (its own rejection sampler).
+    edges = np.r_[-np.inf, np.linspace(-4.5, 4.5, 181), np.inf]
+    expected = np.diff(stats.norm.cdf(edges)) * z.size
+    counts, _ = np.histogram(z, edges)
+    chi2 = ((counts - expected) ** 2 / expected).sum()
+    assert stats.chi2.sf(chi2, edges.size - 2) > 1e-3
+    tail = np.abs(z) > physics._ZIG_R
+    assert tail.sum() == pytest.approx(2 * stats.norm.sf(physics._ZIG_R) * z.size, rel=0.2)
+    assert (z[tail] > 0).mean() == pytest.approx(0.5, abs=0.1)
+    assert np.array_equal(draw(1000, 7), draw(1000, 7))
+    assert not np.array_equal(draw(1000, 7), draw(1000, 8))
+
+
+def test_observation_noise_has_the_requested_standard_deviation():
+    kwargs = dict(trajectory="figure8", init_state_scale=0.5)
+    clean = gym.make("Quad6DOF-v0", **kwargs)
+    noisy = gym.make("Quad6DOF-v0", obs_noise_std=0.01, **kwargs)
+    hover = np.array([PAPER_6DOF.hover_thrust, 0, 0, 0])
+    diffs = []
+    for env in (clean, noisy):
+        env.reset(seed=3)
+    for _ in range(300):
+        diffs.append(noisy.step(hover)[0] - clean.step(hover)[0])
+    z = np.array(diffs).ravel() / 0.01
+    assert z.std() == pytest.approx(1.0, rel=0.05)
+    assert abs(z.mean()) < 0.05
+
+
 def test_gusts_have_the_stationary_standard_deviation():
     env = gym.make(
         "Quad6DOF-v0", effects={"drag": True, "gust_std": 0.8, "gust_time_constant": 0.05}
