@@ -611,8 +611,3 @@ def warm_up(kernels: Kernels, n_ext: int, n_actions: int, n_obs: int, n_wind: in
     kernels.step(X, A, refs, P, C, rng, gust, bias, mix, mix, box, frac, obsbox, xbox,
                  np.zeros(0, bool), obs, reward, end, u, u_cmd, work)  # fmt: skip
     kernels.finish(X, refs, C, rng, bias, obsbox, xbox, obs, reward, end)
-
-
-def new_seed(rng: np.random.Generator) -> np.uint64:
-    """A generator state for the kernels' per-member random numbers, drawn from ``rng``."""
-    return np.uint64(rng.integers(0, 2**63))

@@ -113,15 +113,21 @@ _RESET_OPTIONS = ("trajectory", "state")
 
 
 @dataclass
-class _Episode:
-    """What one member draws at reset, in a fixed order from its generator."""
+class _Draws:
+    """What one member draws at reset, in this order from its generator (None: not drawn).
+
+    Attributes:
+        traj: The episode's reference (drawn for ``random``).
+        uniforms: U(0, 1) numbers: the initial-state offset (if ``init_state_scale``), then
+            the parameter factors (if ``param_randomization``).
+        seed: State of the kernels' generator of the member (gusts, observation noise).
+        normals: N(0, 1) numbers: the initial gust (if gusts), then the observation bias.
+    """
 
     traj: Reference
-    x0: FloatArray
-    params: Any
-    seed: np.uint64
-    gust: FloatArray
-    bias: FloatArray
+    uniforms: FloatArray | None
+    seed: int
+    normals: FloatArray | None
 
 
 class _EnvCore:
@@ -200,6 +206,13 @@ class _EnvCore:
             self.obs_noise_std, veh.ndim,
         )  # fmt: skip
         self._P0 = physics.pack_params(params)[None, :]
+        n_factors = len(self.vehicle.randomized_fields)
+        self._n_offset = self._n if self.init_state_scale > 0 else 0
+        self._n_uniforms = self._n_offset + (n_factors if self.param_randomization > 0 else 0)
+        self._n_gust = self.vehicle.ndim if effects.gust_std > 0 else 0
+        self._n_normals = self._n_gust + (self._obs_low.size if effects.obs_bias_std > 0 else 0)
+        if self.param_randomization > 0:
+            self._factor_of_entry, self._more_factors = self._randomised_entries(params)
         self._delay = int(effects.obs_delay_steps)
         self._python_field = rhs is not None and getattr(rhs, "point_source", None) is None
         self._kernels = _kernels_of(self)
@@ -263,56 +276,110 @@ class _EnvCore:
             )
         return x0
 
-    def _hover_thrusts(self, params: Any) -> FloatArray:
-        """Rotor thrusts that give the hover input (limited), the rotor state at reset."""
-        hover = np.zeros(self._m)
-        hover[0] = params.hover_thrust
-        thrust = self._unmix @ hover
-        return np.clip(thrust, params.rotor_force_min, params.rotor_force_max * self._frac)
+    def _randomised_entries(self, params: Any) -> tuple[np.ndarray, list[tuple[int, int]]]:
+        """Which randomised field scales each entry of the parameter vector.
 
-    def _sample_episode(self, rng: np.random.Generator, spec: Any = None) -> _Episode:
-        """Draws one episode from rng: trajectory, initial state, parameters, noise seeds."""
+        Found by doubling each field: an entry that changes must double too (a parameter,
+        or a property proportional to it such as the thrust per squared speed), so that a
+        member's parameter vector is the nominal one times its factors. Returns the factor
+        of each entry (the number of fields: none) and any further (entry, factor) pairs.
+        """
+        names = self.vehicle.randomized_fields
+        nominal = physics.pack_params(params)
+        first = np.full(nominal.size, len(names))
+        more = []
+        for k, name in enumerate(names):
+            doubled = physics.pack_params(params.replace(**{name: getattr(params, name) * 2.0}))
+            changed = np.flatnonzero(doubled != nominal)
+            if not np.allclose(doubled[changed], 2.0 * nominal[changed], rtol=1e-12, atol=0.0):
+                raise ValueError(f"randomised parameter {name!r} must scale the kernels' entries")
+            for entry in changed:
+                if first[entry] == len(names):
+                    first[entry] = k
+                else:
+                    more.append((int(entry), k))
+        return first, more
+
+    def _randomised_params(self, factors: FloatArray) -> Any:
+        """The parameter set scaled by factors (one per randomised field; arrays batch)."""
+        names = self.vehicle.randomized_fields
+        return self.params.replace(
+            **{name: getattr(self.params, name) * f for name, f in zip(names, factors, strict=True)}
+        )
+
+    def _rest_thrusts(self, P: FloatArray) -> FloatArray:
+        """Rotor thrusts giving the hover input m g (limited), rows of P: the reset rotor state."""
+        hover = P[:, physics.P_MASS] * P[:, physics.P_GRAVITY]  # params.hover_thrust
+        thrust = hover[:, None] * self._unmix[:, 0]
+        low, high = P[:, physics.P_FMIN, None], P[:, physics.P_FMAX, None] * self._frac
+        return np.minimum(np.maximum(thrust, low), high)
+
+    def _draw_episode(self, rng: np.random.Generator, spec: Any = None) -> _Draws:
+        """Draws one episode from rng: its trajectory, uniforms, a seed, normals (3 calls).
+
+        Only the draws run per member; :meth:`_episode_arrays` turns the draws of many
+        members into their starts in one batch.
+        """
         spec = self._trajectory_spec if spec is None else spec
         traj = (
             spec
             if isinstance(spec, Reference)
             else make_trajectory(spec, ndim=self.vehicle.ndim, rng=rng)
         )
-        offset = np.zeros(self._n)
-        if self.init_state_scale > 0:
-            offset = rng.uniform(-1.0, 1.0, self._n) * (
-                self.init_state_scale * self.vehicle.init_scale
-            )
-        params = self.params
+        uniforms = rng.random(self._n_uniforms) if self._n_uniforms else None
+        seed = rng.bit_generator.random_raw()
+        normals = rng.standard_normal(self._n_normals) if self._n_normals else None
+        return _Draws(traj, uniforms, seed, normals)
+
+    def _episode_arrays(self, draws: list[_Draws]) -> tuple[FloatArray, ...]:
+        """Batched start of the drawn episodes: (X0, P, seeds, gust, bias, factors).
+
+        The single env calls it with one member, the vector env with the members it resets,
+        so both compute every number the same way. ``P`` is ``_P0`` (one row) without
+        parameter randomisation, ``factors`` then None.
+        """
+        r, n = len(draws), self._n
+        X0 = np.empty((r, self._n_ext))
+        if all(d.traj is self._rest_of[0] for d in draws):
+            X0[:, :n] = self._rest_of[1]
+        else:
+            for j, d in enumerate(draws):
+                if d.traj is not self._rest_of[0]:  # the rest state on a reference, reused
+                    self._rest_of = (d.traj, self.vehicle.initial_state(d.traj(0.0)))
+                X0[j, :n] = self._rest_of[1]
+        if self._n_uniforms:
+            U = np.array([d.uniforms for d in draws])
+        if self._n_offset:
+            X0[:, :n] += (2.0 * U[:, :n] - 1.0) * (self.init_state_scale * self.vehicle.init_scale)
+        P, factors = self._P0, None
         if self.param_randomization > 0:
             s = self.param_randomization
-            names = self.vehicle.randomized_fields
-            factors = rng.uniform(1 - s, 1 + s, len(names))  # the stream of scalar draws
-            changes = {
-                name: getattr(params, name) * float(f)
-                for name, f in zip(names, factors, strict=True)
-            }
-            params = params.replace(**changes)
-        if traj is not self._rest_of[0]:  # the rest state on a reference, kept for reuse
-            self._rest_of = (traj, self.vehicle.initial_state(traj(0.0)))
-        x0 = self._rest_of[1] + offset
+            factors = (1.0 - s) + (2.0 * s) * U[:, self._n_offset :]
+            scale = np.concatenate([factors, np.ones((r, 1))], axis=1)[:, self._factor_of_entry]
+            for entry, k in self._more_factors:
+                scale[:, entry] *= factors[:, k]
+            P = self._P0 * scale  # entry by entry the product the scaled field gives
         if self._rotor_state:
-            x0 = np.concatenate([x0, self._hover_thrusts(params)])
-        seed = physics.new_seed(rng)
-        effects = self.effects
-        gust = np.zeros(self.vehicle.ndim)
-        if effects.gust_std > 0:
-            gust = effects.gust_std * rng.standard_normal(self.vehicle.ndim)
-        bias = np.zeros(self._obs_low.size)
-        if effects.obs_bias_std > 0:
-            bias = effects.obs_bias_std * rng.standard_normal(self._obs_low.size)
-        return _Episode(traj, x0, params, seed, gust, bias)
+            X0[:, n:] = self._rest_thrusts(P)
+        seeds = np.array([d.seed for d in draws], dtype=np.uint64)
+        gust = np.zeros((r, self.vehicle.ndim))
+        bias = np.zeros((r, self._obs_low.size))
+        if self._n_normals:
+            N = np.array([d.normals for d in draws])
+            if self._n_gust:
+                gust[:] = self.effects.gust_std * N[:, : self._n_gust]
+            if self._n_normals > self._n_gust:
+                bias[:] = self.effects.obs_bias_std * N[:, self._n_gust :]
+        return X0, P, seeds, gust, bias, factors
 
-    def _set_state(self, x: FloatArray, state: FloatArray, params: Any) -> None:
-        """Writes a reset-option state (rigid part, and rotor thrusts if given) into x."""
+    def _set_state(self, x: FloatArray, state: FloatArray, P: FloatArray) -> None:
+        """Writes a reset-option state (rigid part, and rotor thrusts if given) into x.
+
+        ``P`` is the member's parameter vector as a (1, len) row.
+        """
         x[: state.size] = state
         if self._rotor_state and state.size == self._n:
-            x[self._n :] = self._hover_thrusts(params)
+            x[self._n :] = self._rest_thrusts(P)[0]
 
     def action_from_input(self, u: FloatArray) -> FloatArray:
         """The action that commands the collective input ``u`` (clipped into the action box).
@@ -351,7 +418,7 @@ class _EnvCore:
         b = X.shape[0]
         obs = np.empty((b, self._obsbox.shape[1]))
         reward, end = np.empty(b), np.empty(b, dtype=bool)
-        u, u_cmd = np.zeros((b, self._m)), np.zeros((b, self._m))
+        u, u_cmd = np.empty((b, self._m)), np.empty((b, self._m))  # every row written
         if not self._python_field:
             ok = kern.step(
                 X, A, refs, P, self._consts, rng, gust, bias, self._mix, self._unmix,
@@ -449,21 +516,16 @@ class QuadrotorEnv(_EnvCore, gym.Env):
         """Starts an episode; options: ``trajectory`` (this episode only), ``state``."""
         super().reset(seed=seed)
         options = self._check_options(options)
-        episode = self._sample_episode(self.np_random, options.get("trajectory"))
-        self._traj = episode.traj
-        self._refs = episode.traj(self._t_table)
-        params = episode.params
-        if self._custom_rhs is None and params is not self.params:
-            self._rhs = self.vehicle.with_params(params).rhs
-        self._P = physics.pack_params(params)[None, :] if params is not self.params else self._P0
-        x0 = episode.x0
+        draws = self._draw_episode(self.np_random, options.get("trajectory"))
+        X0, self._P, self._rng, self._gust, self._bias, factors = self._episode_arrays([draws])
+        self._traj = draws.traj
+        self._refs = draws.traj(self._t_table)
+        if factors is not None and self._custom_rhs is None:
+            self._rhs = self.vehicle.with_params(self._randomised_params(factors[0])).rhs
         if "state" in options:
-            self._set_state(x0, self._check_state(options["state"], ()), params)
-        self._X = x0[None, :].copy()
+            self._set_state(X0[0], self._check_state(options["state"], ()), self._P)
+        self._X = X0
         self._k_step = 0
-        self._rng = np.array([episode.seed], dtype=np.uint64)
-        self._gust = episode.gust[None, :]
-        self._bias = episode.bias[None, :]
         self._was_reset = True
         self._trail = [self._X[0, : self._n].copy()]
         obs = self._observe_all(self._X, self._refs[:1], self._rng, self._bias)[0]
@@ -591,11 +653,12 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self._needs_reset = np.zeros(b, dtype=bool)
         self._rngs = [np.random.default_rng() for _ in range(b)]
         self._trajs: list[Reference] = []
-        self._params_list: list[Any] = [self.params] * b
+        self._factors = np.ones((b, len(self.vehicle.randomized_fields)))
         self._rng_state = np.zeros(b, dtype=np.uint64)
         self._gust = np.zeros((b, self.vehicle.ndim))
         self._bias = np.zeros((b, self._obs_low.size))
-        self._P = self._P0
+        # The parameter vector of every member, or the nominal one shared by all.
+        self._P = np.tile(self._P0, (b, 1)) if self.param_randomization > 0 else self._P0
         self._all_active = np.ones(b, dtype=bool)
         self._steps_bound = 0  # no member has taken more steps since its reset
         self._was_reset = False
@@ -614,37 +677,42 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         if "state" in options:
             state = self._check_state(options["state"], (self.num_envs,))
         self._trajs = [None] * self.num_envs  # type: ignore[list-item]
-        everyone = np.ones(self.num_envs, dtype=bool)
-        self._reset_members(everyone, state, options.get("trajectory"))
+        self._reset_members(np.arange(self.num_envs), state, options.get("trajectory"))
         self._refresh_episode_tables()
         self._needs_reset[:] = False
         self._steps_bound = 0
         self._was_reset = True
         obs = self._observe_all(self._states, self._references(), self._rng_state, self._bias)
         if self._delay:
-            # Ring buffer of the last delay + 1 observations; slot _hist_pos is the newest.
-            self._history = np.repeat(obs[None, :, :], self._delay + 1, axis=0)
-            self._hist_pos = 0
-            obs = obs.copy()
+            # The observations still to return, oldest first: each step appends the new one
+            # and returns (hands over) the oldest, so no observation is copied.
+            self._pending = deque(obs.copy() for _ in range(self._delay))
         return obs, {}
 
-    def _reset_members(self, mask: FloatArray, state: Any = None, spec: Any = None) -> None:
-        for i in np.flatnonzero(mask):
-            episode = self._sample_episode(self._rngs[i], spec)
-            self._trajs[i] = episode.traj
-            self._params_list[i] = episode.params
-            if state is not None:
-                self._set_state(episode.x0, state if state.ndim == 1 else state[i],
-                                episode.params)  # fmt: skip
-            self._states[i] = episode.x0
-            self._rng_state[i] = episode.seed
-            self._gust[i] = episode.gust
-            self._bias[i] = episode.bias
-        self._steps[mask] = 0
+    def _reset_members(self, rows: np.ndarray, state: Any = None, spec: Any = None) -> None:
+        """Starts new episodes of the members in rows: each draws from its own generator.
 
-    def _update_episode_rows(self, mask: FloatArray) -> None:
-        """After an autoreset: writes the new members' waypoints and parameters in place."""
-        rows = np.flatnonzero(mask)
+        Only the draws run per member; the rest is one batched computation
+        (:meth:`_episode_arrays`, as the single env's reset).
+        """
+        draws = [self._draw_episode(self._rngs[i], spec) for i in rows]
+        X0, P, seeds, gust, bias, factors = self._episode_arrays(draws)
+        for j, i in enumerate(rows):
+            self._trajs[i] = draws[j].traj
+            if state is not None:
+                P_j = P[j : j + 1] if factors is not None else P
+                self._set_state(X0[j], state if state.ndim == 1 else state[i], P_j)
+        self._states[rows] = X0
+        self._rng_state[rows] = seeds
+        self._gust[rows] = gust
+        self._bias[rows] = bias
+        if factors is not None:
+            self._factors[rows] = factors
+            self._P[rows] = P
+        self._steps[rows] = 0
+
+    def _update_episode_rows(self, rows: np.ndarray) -> None:
+        """After an autoreset: writes the new members' waypoints in place."""
         if isinstance(self._batched_traj, RandomWaypoints):
             for i in rows:
                 self._batched_traj.waypoints[i] = self._trajs[i].waypoints  # type: ignore[attr-defined]
@@ -652,13 +720,9 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             pass  # holds self._trajs itself
         elif self._batched_traj is None and any(self._trajs[i] is not self._trajs[0] for i in rows):
             self._refresh_episode_tables()  # an autoreset left a per-reset trajectory
-            return
-        if self.param_randomization > 0:
-            for i in rows:
-                self._P[i] = physics.pack_params(self._params_list[i])
 
     def _refresh_episode_tables(self) -> None:
-        """Builds the batched reference source and, if randomised, batched parameters."""
+        """Builds the batched reference source (and, if randomised, the batched rhs)."""
         first = self._trajs[0]
         if all(t is first for t in self._trajs):
             self._shared_refs = first(self._t_table)
@@ -673,20 +737,8 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             )
         else:
             self._batched_traj = _ListTrajectory(self._trajs)
-        if self.param_randomization > 0:
-            self._P = np.stack([physics.pack_params(p) for p in self._params_list])
-            vehicle = self.vehicle.with_params(
-                self.params.replace(
-                    **{
-                        name: np.array([getattr(p, name) for p in self._params_list])
-                        for name in self.vehicle.randomized_fields
-                    }
-                )
-            )
-            if self._custom_rhs is None:
-                self._rhs = vehicle.rhs
-        else:
-            self._P = self._P0
+        if self.param_randomization > 0 and self._custom_rhs is None:
+            self._rhs = self.vehicle.with_params(self._randomised_params(self._factors.T)).rhs
 
     def _references(self) -> FloatArray:
         if self._batched_traj is None:
@@ -712,8 +764,9 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         any_reset = bool(resetting.any())
         self._steps_bound += 1
         if any_reset:
-            self._reset_members(resetting)
-            self._update_episode_rows(resetting)
+            rows = np.flatnonzero(resetting)
+            self._reset_members(rows)
+            self._update_episode_rows(rows)
             active = ~resetting
             self._steps[active] += 1
         else:
@@ -736,22 +789,22 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         else:
             truncated = np.zeros(self.num_envs, dtype=bool)
         if self._delay:
-            slots = self._delay + 1
-            self._hist_pos = (self._hist_pos + 1) % slots
-            self._history[self._hist_pos] = obs
-            if any_reset:
-                self._history[:, resetting] = obs[resetting]
-            obs = self._history[(self._hist_pos + 1) % slots].copy()
+            if any_reset:  # a new episode repeats its first observation
+                for old in self._pending:
+                    old[resetting] = obs[resetting]
+            self._pending.append(obs)
+            obs = self._pending.popleft()
         self._needs_reset = terminated | truncated
+        states = self._states.copy()  # one copy; the info holds views of it
         info = {
-            "state": self._states[:, : self._n].copy(),
+            "state": states[:, : self._n],
             "reference": refs,
             "action": u,
             "commanded": u_cmd,
             "time": self._steps * self.dt,
         }
         if self._rotor_state:
-            info["rotor_thrusts"] = self._states[:, self._n :].copy()
+            info["rotor_thrusts"] = states[:, self._n :]
         return obs, reward, terminated, truncated, info
 
     def render(self) -> FloatArray | None:
