@@ -206,6 +206,8 @@ def _swap_twins(
             valid = p2 > tol * norms2[[support[pos], *simple, *richer]]
             gains = np.where(valid, dot**2 / np.maximum(p2, 1e-300), -np.inf)
             rss = rss_s + vb[pos] ** 2 - gains  # RSS with each column in c's place
+            if not np.isfinite(rss[0]):
+                continue  # c itself lies in the span of the others to round-off: no test
             sigma2 = rss[0] / max(n_rows - len(support), 1.0)
             n_simple = len(simple)
             # An invalid column has infinite RSS: inf - inf compares False (no swap), quietly.
