@@ -437,16 +437,30 @@ def mbrl(
     disagreement: Annotated[
         float, typer.Option(help="end imagined episodes above this member spread (0: never)")
     ] = 0.1,
+    effects: Annotated[
+        str | None,
+        typer.Option(help="effects of the ground truth only, e.g. drag or drag,wind or all"),
+    ] = None,
 ) -> None:
     """SINDy model-based RL against model-free RL over seeds (mean and 95 % intervals)."""
+    import gymnasium as gym
+
     from agents.mbrl import MBRLConfig, run_experiment
 
+    env_options = {}
+    if effects:
+        names = [e.strip() for e in effects.split(",") if e.strip()]
+        env_options["effects"] = "all" if names == ["all"] else names
+        try:
+            gym.make(env, **env_options).close()
+        except (ValueError, gym.error.Error) as exc:
+            _fail(str(exc))
     config = MBRLConfig(
         env_id=env, task=task, algo=algo.value, iterations=iterations,
         initial_real_steps=initial_real_steps, real_steps_per_iteration=real_steps,
         model_steps_per_iteration=model_steps, baseline_steps=baseline_steps,
         ensemble=ensemble, ensemble_mode=ensemble_mode.value,
-        disagreement=disagreement if disagreement > 0 else None,
+        disagreement=disagreement if disagreement > 0 else None, env_options=env_options,
     )  # fmt: skip
     _writable_folder(out)
     res = run_experiment(config, out, seeds, workers, address, echo=typer.echo)

@@ -118,3 +118,18 @@ def test_identify_bags_an_ensemble_around_the_selected_model():
     assert "selection" in models[0].meta  # member 0 is the data-alone selection
     truth = model_from_truth("planar", models[0].feature_names)
     np.testing.assert_allclose(models[0].coefficients, truth.coefficients, rtol=1e-6, atol=1e-6)
+
+
+def test_cli_effects_act_on_the_ground_truth_only(tmp_path):
+    from typer.testing import CliRunner
+
+    from quad_sindy.cli import app
+
+    runner = CliRunner()
+    bad = runner.invoke(app, ["mbrl", "--effects", "drag,bogus", "--out", str(tmp_path / "a")])
+    assert bad.exit_code == 2 and "unknown effect 'bogus'" in bad.output
+    assert len(bad.output.strip().splitlines()) == 1
+    config = dataclasses.replace(TINY, env_options={"effects": ["drag"]})
+    assert config.truth_kwargs["effects"] == ["drag"] and "effects" not in config.surrogate_kwargs
+    truth = gym.make("PlanarQuad-v0", **config.truth_kwargs)
+    assert truth.unwrapped.effects.drag
