@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import time
 from collections.abc import Callable
 
@@ -10,17 +11,25 @@ import numpy as np
 
 
 def _rate(step: Callable[[], object], min_seconds: float) -> float:
-    """Calls ``step`` repeatedly for at least min_seconds; returns calls per second."""
-    for _ in range(50):  # warm-up
+    """Calls ``step`` repeatedly for at least min_seconds; returns calls per second.
+
+    Batches of calls double up to 200 between clock reads, so that a slow step (a peer's
+    1024 envs) does not overrun min_seconds by many batches.
+    """
+    start = time.perf_counter()
+    for _ in range(50):  # warm-up, at most a quarter of the time
         step()
-    calls, start = 0, time.perf_counter()
+        if time.perf_counter() - start > min_seconds / 4:
+            break
+    calls, batch, start = 0, 1, time.perf_counter()
     while True:
-        for _ in range(200):
+        for _ in range(batch):
             step()
-        calls += 200
+        calls += batch
         elapsed = time.perf_counter() - start
         if elapsed >= min_seconds:
             return calls / elapsed
+        batch = min(2 * batch, 200)
 
 
 def _single_stepper(env_id: str, **kwargs: object) -> tuple[Callable[[], object], int, object]:
@@ -43,6 +52,53 @@ def _vector_stepper(
     env.reset(seed=0)
     actions = np.tile(_hover_action(env, single=True), (num_envs, 1))
     return (lambda: env.step(actions)), num_envs, env
+
+
+PEER_EXTRA = "pip install 'quad-sindy[peers]'"
+"""How to install the peers measured by :func:`bench_envs`."""
+
+
+def _peer_missing() -> str | None:
+    """Why the peer (rotorpy's batched QuadrotorEnv) cannot run here, or None."""
+    for module in ("rotorpy", "torchdiffeq"):  # rotorpy's batched env integrates with it
+        if importlib.util.find_spec(module) is None:
+            return f"{module} not installed ({PEER_EXTRA})"
+    return None
+
+
+def _rotorpy_stepper(num_envs: int) -> tuple[Callable[[], object], int, object]:
+    """The peer: rotorpy's ``QuadrotorEnv`` (an SB3 VecEnv of torch-batched Crazyflies).
+
+    Motor-speed commands at each member's hover speed; its default model (motor lag,
+    rotor and body drag: ``aero=True``), RK4 at 100 Hz, as our envs' 0.01 s step. torch
+    runs on one thread, as our envs do (two threads on a loaded two-core machine ran
+    ~20x slower). rotorpy registers ``Quadrotor-v0`` with Gymnasium, but ``gym.make``
+    refuses it (not a ``gymnasium.Env``), so the class is made directly.
+    """
+    import torch
+    from rotorpy.learning.quadrotor_environments import QuadrotorEnv
+    from rotorpy.vehicles.crazyflie_params import quad_params
+
+    torch.set_num_threads(1)
+    n = num_envs
+    initial = {
+        "x": torch.zeros(n, 3, dtype=torch.float64),
+        "v": torch.zeros(n, 3, dtype=torch.float64),
+        "q": torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=torch.float64).repeat(n, 1),
+        "w": torch.zeros(n, 3, dtype=torch.float64),
+        "wind": torch.zeros(n, 3, dtype=torch.float64),
+        "rotor_speeds": torch.zeros(n, 4, dtype=torch.float64),
+    }
+    env = QuadrotorEnv(
+        num_envs=n, initial_states=initial, control_mode="cmd_motor_speeds",
+        quad_params=dict(quad_params), sim_rate=100, render_mode="None",
+    )  # fmt: skip
+    env.reset(seed=0)
+    hover = env.default_rotor_speed.cpu().numpy().reshape(n, 1)
+    low = np.asarray(env.rotor_speed_min, dtype=np.float64).reshape(n, 1)
+    high = np.asarray(env.rotor_speed_max, dtype=np.float64).reshape(n, 1)
+    actions = np.repeat(2.0 * (hover - low) / (high - low) - 1.0, 4, axis=1)
+    return (lambda: env.step(actions)), n, env
 
 
 def _best_rates(
@@ -90,6 +146,7 @@ def bench_envs(
     min_seconds: float = 2.0,
     effects: tuple[object, ...] = (None, "all"),
     rounds: int = 3,
+    peers: bool = True,
 ) -> list[dict]:
     """Measures Pendulum-v1 and each env id single and vectorised, in one run.
 
@@ -101,9 +158,12 @@ def bench_envs(
             ``"all"``: every effect on, observation noise and 10 % parameter randomisation).
         rounds: Every measurement is taken this many times in turn (``min_seconds`` each
             in all), the best kept (see :func:`_best_rates`).
+        peers: Also measure rotorpy's ``QuadrotorEnv`` with 1 and ``num_envs`` members
+            (:func:`_rotorpy_stepper`) where it is installed (the ``peers`` extra).
 
     Returns:
-        Rows ``env, mode, effects, steps_per_s, ratio`` (ratio to Pendulum-v1's single rate).
+        Rows ``env, mode, effects, steps_per_s, ratio`` (ratio to Pendulum-v1's single rate);
+        a peer that cannot run gives a row with only ``note``.
     """
     labels = [("Pendulum-v1", "single", "-")]
     steppers = [_single_stepper("Pendulum-v1")]
@@ -117,11 +177,19 @@ def bench_envs(
             steppers.append(_single_stepper(env_id, **kwargs))
             labels.append((env_id, f"vector x{num_envs}", label))
             steppers.append(_vector_stepper(env_id, num_envs, **kwargs))
+    missing = _peer_missing() if peers else None
+    if peers and missing is None:
+        for width in (1, num_envs):
+            labels.append(("rotorpy", f"vector x{width}", "aero"))
+            steppers.append(_rotorpy_stepper(width))
     rates = _best_rates(steppers, min_seconds * rounds, rounds)
-    return [
+    rows = [
         {"env": env, "mode": mode, "effects": eff, "steps_per_s": rate, "ratio": rate / rates[0]}
         for (env, mode, eff), rate in zip(labels, rates, strict=True)
     ]
+    if missing is not None:
+        rows.append({"note": f"(peer rotorpy skipped: {missing})"})
+    return rows
 
 
 def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:

@@ -99,13 +99,19 @@ def bench_envs_cmd(
     num_envs: Annotated[int, typer.Option(help="vector env size")] = 1024,
     seconds: Annotated[float, typer.Option(help="minimum timing per measurement [s]")] = 2.0,
 ) -> None:
-    """Steps/s of both envs (single, vector; without and with every effect) vs Pendulum-v1."""
+    """Steps/s of both envs (single, vector; without and with every effect) vs Pendulum-v1.
+
+    A peer (rotorpy's QuadrotorEnv) is measured too where the ``peers`` extra is installed.
+    """
     import quad_envs
     from quad_sindy.bench import bench_envs
 
     rows = bench_envs(quad_envs.ENV_IDS, num_envs, seconds)
     typer.echo(f"{'env':<16} {'mode':<14} {'effects':<8} {'steps/s':>12} {'x Pendulum-v1':>14}")
     for row in rows:
+        if "note" in row:
+            typer.echo(row["note"])
+            continue
         typer.echo(
             f"{row['env']:<16} {row['mode']:<14} {row['effects']:<8} "
             f"{row['steps_per_s']:>12,.0f} {row['ratio']:>14.2f}"
