@@ -317,67 +317,81 @@ _ZIG_K, _ZIG_W, _ZIG_F, _ZIG_R = _ziggurat_tables()
 
 
 @numba.njit(cache=True, inline="always")
-def _next_bits(rng: Any, i: int) -> Any:
-    """The next 64 random bits of member i (splitmix64: a counter, then a mixer)."""
-    z = rng[i] + _GOLDEN
-    rng[i] = z
+def _mix64(z: Any) -> Any:
+    """splitmix64's output function: 64 random bits from the counter value z."""
     z = (z ^ (z >> np.uint64(30))) * _MIX1
     z = (z ^ (z >> np.uint64(27))) * _MIX2
     return z ^ (z >> np.uint64(31))
 
 
 @numba.njit(cache=True, inline="always")
-def _next_uniform(rng: Any, i: int) -> float:
-    """A uniform number in (0, 1) for member i."""
-    top53 = np.int64(_next_bits(rng, i) >> np.uint64(11))
+def _uniform(bits: Any) -> float:
+    """A uniform number in (0, 1) from 64 random bits (their top 53)."""
+    top53 = np.int64(bits >> np.uint64(11))
     return (float(top53) + 0.5) * (1.0 / 9007199254740992.0)
 
 
 @numba.njit(cache=True, inline="always")
-def _normal_rare(rng: Any, i: int, bits: Any, x: float) -> float:
-    """The ziggurat's rare branches (~1 % of draws): the tail, a wedge, or a new draw."""
+def _normal_rare(z: Any, bits: Any, x: float) -> tuple[float, Any]:
+    """The ziggurat's rare branches (~1 % of draws): the tail, a wedge, or a new draw.
+
+    Returns the normal and the counter after the draws it took.
+    """
     while True:
         layer = int(bits & np.uint64(0xFF))
         if layer == 0:  # the tail beyond r (Marsaglia's exponential rejection)
             while True:
-                tail = -math.log(_next_uniform(rng, i)) / _ZIG_R
-                if -2.0 * math.log(_next_uniform(rng, i)) > tail * tail:
-                    return -(_ZIG_R + tail) if x < 0.0 else _ZIG_R + tail
-        height = _ZIG_F[layer] + _next_uniform(rng, i) * (_ZIG_F[layer - 1] - _ZIG_F[layer])
+                z += _GOLDEN
+                tail = -math.log(_uniform(_mix64(z))) / _ZIG_R
+                z += _GOLDEN
+                if -2.0 * math.log(_uniform(_mix64(z))) > tail * tail:
+                    return (-(_ZIG_R + tail) if x < 0.0 else _ZIG_R + tail), z
+        z += _GOLDEN
+        height = _ZIG_F[layer] + _uniform(_mix64(z)) * (_ZIG_F[layer - 1] - _ZIG_F[layer])
         if height < math.exp(-0.5 * x * x):
-            return x
-        bits = _next_bits(rng, i)
+            return x, z
+        z += _GOLDEN
+        bits = _mix64(z)
         magnitude = (bits >> np.uint64(9)) & np.uint64(0xFFFFFFFFFFFFF)
         layer = int(bits & np.uint64(0xFF))
         x = float(np.int64(magnitude)) * _ZIG_W[layer]
         if bits & np.uint64(0x100):
             x = -x
         if magnitude < _ZIG_K[layer]:
-            return x
+            return x, z
 
 
 @numba.njit(cache=True, inline="always")
-def _next_normal(rng: Any, i: int) -> float:
-    """A standard normal for member i: one 64-bit draw and a table look-up ~99 % of the time.
+def _normal(z: Any) -> tuple[float, Any]:
+    """A standard normal from counter z: one 64-bit draw and a table look-up ~99 % of the time.
 
     Bits 0-7 pick the layer, bit 8 the sign, bits 9-60 the magnitude (as numpy's ziggurat).
+    Returns the normal and the advanced counter.
     """
-    bits = _next_bits(rng, i)
+    z += _GOLDEN
+    bits = _mix64(z)
     magnitude = (bits >> np.uint64(9)) & np.uint64(0xFFFFFFFFFFFFF)
     layer = int(bits & np.uint64(0xFF))
     x = float(np.int64(magnitude)) * _ZIG_W[layer]
     if bits & np.uint64(0x100):
         x = -x
     if magnitude < _ZIG_K[layer]:
-        return x
-    return _normal_rare(rng, i, bits, x)
+        return x, z
+    return _normal_rare(z, bits, x)
 
 
 @numba.njit(cache=True, inline="always")
 def _add_noise(rng: Any, i: int, scale: float, values: Any) -> None:
-    """Adds ``scale`` times independent standard normals to every entry of ``values``."""
+    """Adds ``scale`` times independent standard normals to every entry of ``values``.
+
+    Member i's counter ``rng[i]`` is read once and written back once (kept in a register
+    in between rather than stored per draw).
+    """
+    z = rng[i]
     for j in range(values.shape[0]):
-        values[j] += scale * _next_normal(rng, i)
+        x, z = _normal(z)
+        values[j] += scale * x
+    rng[i] = z
 
 
 # -- shared pieces of the kernels (inlined into them) ------------------------------------
