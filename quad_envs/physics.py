@@ -467,6 +467,51 @@ def command_batch(A, P, C, mix, unmix, box, frac, u_app, u_cmd, work):  # noqa: 
     return True
 
 
+@numba.njit(cache=True)
+def episode_starts(  # noqa: ANN201
+    X0, n, U, n_offset, offset_scale, spread, P0, factor_of_entry, more_factors,  # noqa: ANN001
+    unmix0, frac, N, gust_std, bias_std, P, F, gust, bias,  # noqa: ANN001
+):  # fmt: skip
+    """The starts of drawn episodes from their draws, in place (resets and autoresets).
+
+    Row j of ``X0`` (r, n_ext) holds a rest state in its first n columns. The first
+    ``n_offset`` (0 or n) of them get the offset (2 U - 1) ``offset_scale`` (U's first
+    columns). With ``spread`` > 0 the factors F = (1 - spread) + 2 spread U (U's other
+    columns) scale the nominal parameters ``P0``: P[j, e] = P0[e] F[j, factor_of_entry[e]]
+    (an index past F's columns: unscaled), times F[j, k] for each (e, k) row of
+    ``more_factors``; else ``P`` is the nominal (1, len) row, read only. Rotor states (the
+    columns after n) are the thrusts ``unmix0`` m g that give the hover input (m g is
+    ``params.hover_thrust``), limited to [T_min, T_max ``frac``]. ``gust`` and ``bias``
+    are ``gust_std`` and ``bias_std`` times N's first gust columns and the rest (zero if
+    the std is zero).
+    """
+    r, n_ext = X0.shape
+    n_gust = gust.shape[1] if gust_std > 0.0 else 0
+    for j in range(r):
+        for q in range(n_offset):
+            X0[j, q] += (2.0 * U[j, q] - 1.0) * offset_scale[q]
+        row = 0
+        if spread > 0.0:
+            row = j
+            nf = F.shape[1]
+            for f in range(nf):
+                F[j, f] = (1.0 - spread) + (2.0 * spread) * U[j, n_offset + f]
+            for e in range(P0.shape[0]):
+                k = factor_of_entry[e]
+                P[j, e] = P0[e] * F[j, k] if k < nf else P0[e]
+            for m in range(more_factors.shape[0]):
+                P[j, more_factors[m, 0]] *= F[j, more_factors[m, 1]]
+        hover = P[row, _MASS] * P[row, P_GRAVITY]
+        for i in range(n_ext - n):
+            thrust = unmix0[i] * hover
+            X0[j, n + i] = min(max(thrust, P[row, _FMIN]), P[row, _FMAX] * frac[i])
+        for q in range(gust.shape[1]):
+            gust[j, q] = gust_std * N[j, q] if gust_std > 0.0 else 0.0
+        for q in range(bias.shape[1]):
+            bias[j, q] = bias_std * N[j, n_gust + q] if bias_std > 0.0 else 0.0
+    return True
+
+
 # -- kernels built per vector field ------------------------------------------------------
 
 

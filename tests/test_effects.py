@@ -355,6 +355,26 @@ def test_vector_env_validates_reset_option_shapes():
     np.testing.assert_allclose(info["state"][:, 2], [0.5, 1.0, 1.5], atol=1e-12)
 
 
+def test_a_reset_state_without_rotor_thrusts_starts_them_at_each_members_hover():
+    from quad_envs.physics import P_MASS
+
+    kwargs = dict(effects={"rotor_dynamics": True}, param_randomization=0.2)
+    venv = gym.make_vec("Quad6DOF-v0", num_envs=3, **kwargs)
+    states = np.zeros((3, 12))
+    states[:, 2] = 1.0
+    obs, _ = venv.reset(seed=4, options={"state": states})
+    mass = venv.unwrapped._P[:, P_MASS]  # each member's randomised mass
+    assert np.ptp(mass) > 1e-3
+    hover = np.zeros((4, 3))
+    hover[0] = mass * PAPER_6DOF.gravity
+    expected = np.linalg.solve(PAPER_6DOF.mixer, hover).T
+    np.testing.assert_allclose(obs[:, -4:], expected, rtol=1e-12)  # the observed rotor thrusts
+    np.testing.assert_array_equal(obs[:, :12], states)
+    single = gym.make("Quad6DOF-v0", **kwargs)
+    obs_1, _ = single.reset(seed=5, options={"state": states[1]})
+    np.testing.assert_array_equal(obs_1, obs[1])
+
+
 @pytest.mark.parametrize("env_id", IDS)
 def test_env_pickles_after_render(env_id):
     env = gym.make(env_id, render_mode="rgb_array", effects="all")

@@ -211,8 +211,13 @@ class _EnvCore:
         self._n_uniforms = self._n_offset + (n_factors if self.param_randomization > 0 else 0)
         self._n_gust = self.vehicle.ndim if effects.gust_std > 0 else 0
         self._n_normals = self._n_gust + (self._obs_low.size if effects.obs_bias_std > 0 else 0)
+        self._offset_scale = self.init_state_scale * np.asarray(veh.init_scale, dtype=np.float64)
+        self._factor_of_entry = np.full(self._P0.shape[1], n_factors)
+        self._more_factors = np.zeros((0, 2), dtype=np.int64)
         if self.param_randomization > 0:
             self._factor_of_entry, self._more_factors = self._randomised_entries(params)
+        self._none = np.zeros((0, 0))  # rows of no draws
+        self._unmix0 = np.ascontiguousarray(self._unmix[:, 0])
         self._delay = int(effects.obs_delay_steps)
         self._python_field = rhs is not None and getattr(rhs, "point_source", None) is None
         self._kernels = _kernels_of(self)
@@ -276,7 +281,7 @@ class _EnvCore:
             )
         return x0
 
-    def _randomised_entries(self, params: Any) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    def _randomised_entries(self, params: Any) -> tuple[np.ndarray, np.ndarray]:
         """Which randomised field scales each entry of the parameter vector.
 
         Found by doubling each field: an entry that changes must double too (a parameter,
@@ -298,7 +303,7 @@ class _EnvCore:
                     first[entry] = k
                 else:
                     more.append((int(entry), k))
-        return first, more
+        return first, np.array(more, dtype=np.int64).reshape(-1, 2)
 
     def _randomised_params(self, factors: FloatArray) -> Any:
         """The parameter set scaled by factors (one per randomised field; arrays batch)."""
@@ -306,13 +311,6 @@ class _EnvCore:
         return self.params.replace(
             **{name: getattr(self.params, name) * f for name, f in zip(names, factors, strict=True)}
         )
-
-    def _rest_thrusts(self, P: FloatArray) -> FloatArray:
-        """Rotor thrusts giving the hover input m g (limited), rows of P: the reset rotor state."""
-        hover = P[:, physics.P_MASS] * P[:, physics.P_GRAVITY]  # params.hover_thrust
-        thrust = hover[:, None] * self._unmix[:, 0]
-        low, high = P[:, physics.P_FMIN, None], P[:, physics.P_FMAX, None] * self._frac
-        return np.minimum(np.maximum(thrust, low), high)
 
     def _draw_episode(self, rng: np.random.Generator, spec: Any = None) -> _Draws:
         """Draws one episode from rng: its trajectory, uniforms, a seed, normals (3 calls).
@@ -347,30 +345,25 @@ class _EnvCore:
                 if d.traj is not self._rest_of[0]:  # the rest state on a reference, reused
                     self._rest_of = (d.traj, self.vehicle.initial_state(d.traj(0.0)))
                 X0[j, :n] = self._rest_of[1]
-        if self._n_uniforms:
-            U = np.array([d.uniforms for d in draws])
-        if self._n_offset:
-            X0[:, :n] += (2.0 * U[:, :n] - 1.0) * (self.init_state_scale * self.vehicle.init_scale)
-        P, factors = self._P0, None
-        if self.param_randomization > 0:
-            s = self.param_randomization
-            factors = (1.0 - s) + (2.0 * s) * U[:, self._n_offset :]
-            scale = np.concatenate([factors, np.ones((r, 1))], axis=1)[:, self._factor_of_entry]
-            for entry, k in self._more_factors:
-                scale[:, entry] *= factors[:, k]
-            P = self._P0 * scale  # entry by entry the product the scaled field gives
-        if self._rotor_state:
-            X0[:, n:] = self._rest_thrusts(P)
+        U = np.array([d.uniforms for d in draws]) if self._n_uniforms else self._none
+        N = np.array([d.normals for d in draws]) if self._n_normals else self._none
+        randomised = self.param_randomization > 0
+        P = np.empty((r, self._P0.shape[1])) if randomised else self._P0
+        F = np.empty((r, len(self.vehicle.randomized_fields)))
+        gust, bias = np.empty((r, self.vehicle.ndim)), np.empty((r, self._obs_low.size))
+        self._starts(X0, U, self._n_offset, self.param_randomization, N, P, F, gust, bias)
         seeds = np.array([d.seed for d in draws], dtype=np.uint64)
-        gust = np.zeros((r, self.vehicle.ndim))
-        bias = np.zeros((r, self._obs_low.size))
-        if self._n_normals:
-            N = np.array([d.normals for d in draws])
-            if self._n_gust:
-                gust[:] = self.effects.gust_std * N[:, : self._n_gust]
-            if self._n_normals > self._n_gust:
-                bias[:] = self.effects.obs_bias_std * N[:, self._n_gust :]
-        return X0, P, seeds, gust, bias, factors
+        return X0, P, seeds, gust, bias, (F if randomised else None)
+
+    def _starts(self, X0: FloatArray, U: FloatArray, n_offset: int, spread: float,
+                N: FloatArray, P: FloatArray, F: FloatArray, gust: FloatArray,
+                bias: FloatArray) -> None:  # fmt: skip
+        """:func:`quad_envs.physics.episode_starts` with this env's constants."""
+        physics.episode_starts(
+            X0, self._n, U, n_offset, self._offset_scale, spread, self._P0[0],
+            self._factor_of_entry, self._more_factors, self._unmix0, self._frac, N,
+            self.effects.gust_std, self.effects.obs_bias_std, P, F, gust, bias,
+        )  # fmt: skip
 
     def _set_state(self, x: FloatArray, state: FloatArray, P: FloatArray) -> None:
         """Writes a reset-option state (rigid part, and rotor thrusts if given) into x.
@@ -378,8 +371,9 @@ class _EnvCore:
         ``P`` is the member's parameter vector as a (1, len) row.
         """
         x[: state.size] = state
-        if self._rotor_state and state.size == self._n:
-            x[self._n :] = self._rest_thrusts(P)[0]
+        if self._rotor_state and state.size == self._n:  # the hover thrusts, as at reset
+            none = self._none
+            self._starts(x[None, :], none, 0, 0.0, none, P, P[:0], P[:1, :0], P[:1, :0])
 
     def action_from_input(self, u: FloatArray) -> FloatArray:
         """The action that commands the collective input ``u`` (clipped into the action box).
