@@ -2,9 +2,11 @@
 
 Not imported to be run: :func:`quad_envs.physics.build_kernels` writes this file's text,
 followed by the lines that bind ``_field`` and ``_observe`` (a vehicle's numba point
-functions, or a surrogate's generated point rhs), as one module into the kernel cache
-folder and imports it, so that numba's on-disk cache applies to every vehicle and every
-identified model without a vehicle switch in the kernel.
+functions, or a surrogate's generated point rhs) and the vehicle's sizes, as one module
+into the kernel cache folder and imports it, so that numba's on-disk cache applies to
+every vehicle and every identified model without a vehicle switch in the kernel. The
+sizes (``_N_STATE``, ``_N_ROTOR``, ``_N_INPUT``, ``_N_OBS``) are compile-time constants
+there, so the compiler unrolls the loops over states, rotors and inputs.
 
 ``_field(x, u, thrust, wind, p, c, out)`` writes the extended dx/dt of one member;
 ``_observe(x, ref, out)`` writes the vehicle's observation of one member.
@@ -35,62 +37,79 @@ from quad_envs.physics import (
     _add_noise,
     _all_finite,
     _command_one,
-    _mix_into,
 )
 
 _field: Any  # bound by the generated module
 _observe: Any  # bound by the generated module
+_N_STATE: int  # the vehicle's rigid-body (or own) state size, bound by the generated module
+_N_ROTOR: int  # its rotors (the mixer's columns)
+_N_INPUT: int  # its collective inputs (the mixer's rows)
+_N_OBS: int  # the entries its _observe writes
 
 
 @numba.njit(cache=True, inline="always")
-def _integrate_one(n, x, thrust, wind, p, c, mix, u, stages):
+def _mix(mix, thrust, u):
+    """The collective input u = mix @ thrust, unrolled for the vehicle's sizes."""
+    for j in range(_N_INPUT):
+        s = 0.0
+        for i in range(_N_ROTOR):
+            s += mix[j, i] * thrust[i]
+        u[j] = s
+
+
+@numba.njit(cache=True, inline="always")
+def _stage(out, x, a, k, rotor):
+    """Writes x + a k into out (the rotor states too only with rotor dynamics)."""
+    for j in range(_N_STATE):
+        out[j] = x[j] + a * k[j]
+    if rotor:
+        for j in range(_N_STATE, _N_STATE + _N_ROTOR):
+            out[j] = x[j] + a * k[j]
+
+
+@numba.njit(cache=True, inline="always")
+def _integrate_one(x, thrust, wind, p, c, mix, u, stages):
     """Classical RK4 (as :func:`quad_envs.integrators.rk4_step`) with the command held.
 
     ``stages`` is a (5, len(x)) work array (the four stages and the stage state).
     """
-    ne = x.shape[0]
     rotor = c[_ROTOR] != 0.0
     h = c[_DT] / c[_SUBSTEPS]
     k1, k2, k3, k4, xs = stages[0], stages[1], stages[2], stages[3], stages[4]
     if not rotor:
-        _mix_into(mix, thrust, u)
+        _mix(mix, thrust, u)
     for _ in range(int(c[_SUBSTEPS])):
         if rotor:
-            _mix_into(mix, x[n:], u)
+            _mix(mix, x[_N_STATE:], u)
         _field(x, u, thrust, wind, p, c, k1)
-        for j in range(ne):
-            xs[j] = x[j] + (0.5 * h) * k1[j]
+        _stage(xs, x, 0.5 * h, k1, rotor)
         if rotor:
-            _mix_into(mix, xs[n:], u)
+            _mix(mix, xs[_N_STATE:], u)
         _field(xs, u, thrust, wind, p, c, k2)
-        for j in range(ne):
-            xs[j] = x[j] + (0.5 * h) * k2[j]
+        _stage(xs, x, 0.5 * h, k2, rotor)
         if rotor:
-            _mix_into(mix, xs[n:], u)
+            _mix(mix, xs[_N_STATE:], u)
         _field(xs, u, thrust, wind, p, c, k3)
-        for j in range(ne):
-            xs[j] = x[j] + h * k3[j]
+        _stage(xs, x, h, k3, rotor)
         if rotor:
-            _mix_into(mix, xs[n:], u)
+            _mix(mix, xs[_N_STATE:], u)
         _field(xs, u, thrust, wind, p, c, k4)
-        for j in range(ne):
+        for j in range(_N_STATE + (_N_ROTOR if rotor else 0)):
             x[j] = x[j] + (h / 6.0) * (k1[j] + 2.0 * (k2[j] + k3[j]) + k4[j])
     if rotor:
-        _mix_into(mix, x[n:], u)
+        _mix(mix, x[_N_STATE:], u)
 
 
 @numba.njit(cache=True, inline="always")
 def _finish_one(x, ref, c, rng, i, bias, obsbox, xbox, obs):
     """Observation (biased, noisy, clipped), reward and termination of one member."""
-    n = xbox.shape[1]
     _observe(x, ref, obs)
     nobs = obs.shape[0]
     if c[_OBS_ROTORS] != 0.0:
-        k = x.shape[0] - n
-        for j in range(k):
-            obs[nobs - k + j] = x[n + j]
+        for j in range(_N_ROTOR):
+            obs[_N_OBS + j] = x[_N_STATE + j]
     out = False
-    for j in range(n):
+    for j in range(_N_STATE):
         if not (xbox[0, j] <= x[j] <= xbox[1, j]):  # NaN fails too
             out = True
     cost = 0.0
@@ -119,11 +138,10 @@ def step(X, A, refs, P, C, rng, gust, bias, mix, unmix, box, frac, obsbox, xbox,
     """
     b = X.shape[0]
     m, k = mix.shape
-    n, nw, na = xbox.shape[1], gust.shape[1], A.shape[1]
+    nw, na = gust.shape[1], A.shape[1]
     if not _all_finite(A):
         return False
-    ne = X.shape[1]
-    stages = work[0:5, :ne]
+    stages = work[0:5, : X.shape[1]]
     thrust, wind, raw = work[5, :k], work[6, :nw], work[7, :na]
     ga, gs = C[_GUST_A], C[_GUST_S]
     one_p = P.shape[0] == 1
@@ -139,7 +157,7 @@ def step(X, A, refs, P, C, rng, gust, bias, mix, unmix, box, frac, obsbox, xbox,
                     gust[i, j] = ga * gust[i, j] + wind[j]
             for j in range(nw):
                 wind[j] = C[_WIND0 + j] + gust[i, j]
-            _integrate_one(n, X[i], thrust, wind, p, C, mix, u_app[i], stages)
+            _integrate_one(X[i], thrust, wind, p, C, mix, u_app[i], stages)
         else:
             for j in range(m):
                 u_app[i, j] = 0.0

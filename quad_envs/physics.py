@@ -619,6 +619,14 @@ def build_kernels(footer: str, depends: tuple[Any, ...] = (), label: str = "kern
     return kernels
 
 
+def _sizes(vehicle: Any) -> str:
+    """The footer lines binding the kernel template's size constants for a vehicle."""
+    return (
+        f"_N_STATE = {vehicle.n_states}\n_N_ROTOR = {vehicle.n_rotors}\n"
+        f"_N_INPUT = {vehicle.n_inputs}\n_N_OBS = {len(vehicle.obs_names)}\n"
+    )
+
+
 def vehicle_kernels(vehicle: Any) -> Kernels:
     """The kernels of a vehicle record (its ``point_field`` and ``point_observe``)."""
     field_mod, field_name = _ref(vehicle.point_field)
@@ -626,7 +634,7 @@ def vehicle_kernels(vehicle: Any) -> Kernels:
     footer = (
         f"from {field_mod} import {field_name} as _field  # noqa: E402\n"
         f"from {obs_mod} import {obs_name} as _observe  # noqa: E402\n"
-    )
+    ) + _sizes(vehicle)
     depends = {sys.modules[field_mod].__file__, sys.modules[obs_mod].__file__}
     return build_kernels(footer, tuple(sorted(depends)), vehicle.name)
 
@@ -645,7 +653,7 @@ def point_rhs_kernels(vehicle: Any, point_source: str) -> Kernels:
         "def _field(x, u, thrust, wind, p, c, out):\n"
         "    point(x, u, out)\n\n\n"
         f"from {obs_mod} import {obs_name} as _observe  # noqa: E402\n"
-    )
+    ) + _sizes(vehicle)
     kernels = build_kernels(footer, (sys.modules[obs_mod].__file__,), f"{vehicle.name}_model")
     # The observation kernel does not involve the field: share the vehicle's (compiled once).
     return dataclasses.replace(kernels, finish=vehicle_kernels(vehicle).finish)
