@@ -35,7 +35,9 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
 6. **Uncertainty (E-SINDy).** A block bootstrap (whole blocks of rows, drawn with
    replacement) refits the chosen candidate ``n_models`` times; each coefficient's spread and
    inclusion probability go into the model; terms kept in fewer than half of the bags are
-   dropped (E-SINDy's inclusion threshold).
+   dropped (E-SINDy's inclusion threshold), unless the term or a near-collinear twin of it
+   (as in step 5) is in at least half: then the bags only disagree on which of two columns
+   the data cannot tell apart carries the direction.
 
 Scores, the rule and the warnings go into ``model.meta["selection"]`` (JSON-safe).
 """
@@ -554,8 +556,20 @@ def _bootstrap(
     std = bags_a.std(axis=0)
     notes = []
     weak = (xi != 0) & (prob < 0.5)
+    full = Gram.stack(block_grams)
     if weak.any():
-        full = Gram.stack(block_grams)
+        # A term whose near-collinear twin stands in for it in the other bags is not weak:
+        # the bags disagree on which of two indistinguishable columns to use, not on whether
+        # the direction belongs to the model (dropping it lost a whole kinematic term).
+        twins: dict[int, set[int]] = {}
+        for simple, complex_, _ in collinear_pairs(full, names):
+            twins.setdefault(simple, set()).add(complex_)
+            twins.setdefault(complex_, set()).add(simple)
+        for i, j in zip(*np.nonzero(weak), strict=True):
+            group = [j, *twins.get(int(j), ())]
+            if np.mean((bags_a[:, i, group] != 0).any(axis=1)) >= 0.5:
+                weak[i, j] = False
+    if weak.any():
         a, z = full.r, full.z
         xi = xi.copy()
         for i in np.unique(np.nonzero(weak)[0]):

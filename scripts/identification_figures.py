@@ -30,6 +30,10 @@ from identification.experiments.synthetic import (
 from identification.fit import FitConfig
 from identification.libraries import planar_library, quad6dof_library
 from identification.selection import select_model
+from quad_envs.params import PlanarQuadParams
+
+HEAVY = PlanarQuadParams(mass=1.2, Ixx=8e-3, arm_length=0.2, rotor_force_max=1.2 * 9.81)
+"""A second non-paper planar vehicle (as in tests/test_selection.py)."""
 
 
 def sim_error_1s(model, clean_trajs, steps=100):
@@ -86,8 +90,22 @@ def main() -> None:
         default="stepwise",
         help="stepwise (default) | stlsq | sr3 (stlsq: the figures before stepwise)",
     )
+    parser.add_argument(
+        "--sweep",
+        type=int,
+        default=0,
+        help="instead: sigma = 1e-3 and 1e-2 over this many seeds (planar)",
+    )
+    parser.add_argument(
+        "--noisy-6dof",
+        action="store_true",
+        help="add the 6-DOF vehicle with sigma = 1e-3 (about 1 to 3 minutes)",
+    )
     args = parser.parse_args()
     config = FitConfig(optimizer=args.optimizer)
+    if args.sweep:
+        sweep(args.sweep, config)
+        return
     print(
         "| case | time [s] | choice | terms | missed | spurious | worst coef err | "
         "rhs err | 1 s sim err / range |"
@@ -124,11 +142,54 @@ def main() -> None:
         return
     clean6 = quad6dof_flights(OTHER_6DOF, FlightSpec(flights=4))
     t0 = time.perf_counter()
-    model, report = select_model(
-        clean6, quad6dof_library(), config=config, windows=(1,), n_models=5
-    )
+    model, report = select_model(clean6, quad6dof_library(), config=config)
     row("ours: 6-DOF m=0.8 clean, RK4", model, truth_quad6dof(OTHER_6DOF),
         quad6dof_drag_rhs(OTHER_6DOF, 0.0), clean6, time.perf_counter() - t0, report)  # fmt: skip
+    if args.noisy_6dof:
+        t0 = time.perf_counter()
+        model, report = select_model(add_noise(clean6, 1e-3), quad6dof_library(), config=config)
+        row("ours: 6-DOF m=0.8 sigma=1e-3", model, truth_quad6dof(OTHER_6DOF),
+            quad6dof_drag_rhs(OTHER_6DOF, 0.0), clean6, time.perf_counter() - t0,
+            report)  # fmt: skip
+
+
+def sweep(seeds, config):
+    """Planar noise over seeds (flights and noise drawn anew): how often each goal holds.
+
+    Goals (issue 9): sigma = 1e-3 exact support and every coefficient within 1 %;
+    sigma = 1e-2 at most 2 terms off and the 1 s simulation error under 5 % of the range.
+    """
+    print("| vehicle | sigma | seed | time [s] | choice | terms | off (missed + spurious) | "
+          "worst coef err | 1 s sim err / range | goal met |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    # The PD is scaled to its vehicle, so at one flight spec any mass and inertia fly the same
+    # states (only the inputs scale): the second vehicle also flies solve_ivp data at 0.3 rad.
+    vehicles = {
+        "m=0.5 kg, RK4, tilt 0.2": (OTHER_PLANAR, {}),
+        "m=1.2 kg, solve_ivp, tilt 0.3": (HEAVY, {"integrator": "solve_ivp", "tilt": 0.3}),
+    }
+    met = {}
+    for name, (params, spec) in vehicles.items():
+        for sigma in (1e-3, 1e-2):
+            for seed in range(seeds):
+                clean = planar_flights(params, FlightSpec(seed=seed, **spec))
+                t0 = time.perf_counter()
+                model, report = select_model(add_noise(clean, sigma, seed=100 + seed),
+                                             planar_library(), config=config)  # fmt: skip
+                seconds = time.perf_counter() - t0
+                check = check_support(model, truth_planar(params))
+                sim = sim_error_1s(model, clean)
+                if sigma < 5e-3:
+                    ok = check.exact_support and check.max_rel_error < 1e-2
+                else:
+                    ok = check.off <= 2 and sim < 0.05
+                met.setdefault((name, sigma), []).append(ok)
+                print(f"| {name} | {sigma:g} | {seed} | {seconds:.1f} | w={report.best.window} "
+                      f"lam={report.best.lam:.1e} | {check.n_terms} | {check.off} | "
+                      f"{check.max_rel_error:.1e} | {sim:.1e} | {'yes' if ok else 'no'} |",
+                      flush=True)  # fmt: skip
+    for (name, sigma), oks in met.items():
+        print(f"{name}, sigma = {sigma:g}: goal met on {sum(oks)} of {len(oks)} seeds")
 
 
 if __name__ == "__main__":

@@ -234,3 +234,31 @@ def test_sigma_1e2_noise_on_a_heavy_vehicle_keeps_the_support_within_two_terms()
             pred = model.simulate(tr.x[start], tr.u[start : start + 100], tr.dt)
             worst = max(worst, float(np.max(np.abs(pred[-1] - tr.x[start + 100]) / span)))
     assert worst < 0.05
+
+
+def test_bootstrap_keeps_a_term_whose_twin_stands_in_for_it_in_the_other_bags(monkeypatch):
+    """E-SINDy drops terms kept in under half of the bags, but a term whose near-collinear twin
+    carries the same direction in the other bags is kept; a lone weak term is still dropped."""
+    import identification.selection as selection
+
+    rng = np.random.default_rng(3)
+    t = np.arange(400) * 0.01
+    phi = 0.02 * np.sin(3 * t)[:, None]  # cos(phi) u1 and u1 collinear to 2e-4
+    u = np.column_stack([1.0 + 0.3 * rng.standard_normal(400), rng.standard_normal(400)])
+    traj = Trajectory(t, phi, u, ("phi",), ("u1", "u2"), meta={})
+    names = ["u1", "cos(phi) u1", "u2", "phi"]
+    draws = iter(range(100))
+
+    def bag(gram, config, feature_names=None):  # u1 in 1 bag of 3, its twin in the others
+        k = next(draws)
+        row = np.zeros((1, 4))
+        row[0, 0 if k % 3 == 0 else 1] = 2.0
+        row[0, 2 if k % 3 == 0 else 3] = 0.1  # u2 in 1 of 3 and phi in 2 of 3: no twins
+        return row
+
+    monkeypatch.setattr(selection, "solve", bag)
+    xi = np.array([[2.0, 0.0, 0.1, 0.0]])
+    kept, _, prob, notes = selection._bootstrap([traj], names, FitConfig(window=1), xi, 9, 0)
+    assert prob[0, 0] == pytest.approx(1 / 3) and prob[0, 2] == pytest.approx(1 / 3)
+    assert kept[0, 0] != 0, "u1 is carried by its twin in the other bags: kept"
+    assert kept[0, 2] == 0 and any("'u2'" in n for n in notes), "u2 alone is weak: dropped"
