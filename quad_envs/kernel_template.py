@@ -37,6 +37,7 @@ from quad_envs.physics import (
     _add_noise,
     _all_finite,
     _command_one,
+    _mix_into,
 )
 
 _field: Any  # bound by the generated module
@@ -50,11 +51,7 @@ _N_OBS: int  # the entries its _observe writes
 @numba.njit(cache=True, inline="always")
 def _mix(mix, thrust, u):
     """The collective input u = mix @ thrust, unrolled for the vehicle's sizes."""
-    for j in range(_N_INPUT):
-        s = 0.0
-        for i in range(_N_ROTOR):
-            s += mix[j, i] * thrust[i]
-        u[j] = s
+    _mix_into(mix, thrust, u, _N_INPUT, _N_ROTOR)
 
 
 @numba.njit(cache=True, inline="always")
@@ -148,7 +145,9 @@ def step(X, A, refs, P, C, rng, gust, bias, mix, unmix, box, frac, obsbox, xbox,
     for i in range(b):
         p = P[0] if one_p else P[i]
         if active[i]:
-            _command_one(A[i], p, C, mix, unmix, box, frac, thrust, u_cmd[i], raw)
+            _command_one(
+                A[i], p, C, mix, unmix, box, frac, thrust, u_cmd[i], raw, _N_INPUT, _N_ROTOR
+            )
             if gs > 0.0:
                 for j in range(nw):
                     wind[j] = 0.0

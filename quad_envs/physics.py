@@ -403,9 +403,11 @@ times the arithmetic of a planar RK4 step); the kernels therefore allocate nothi
 
 
 @numba.njit(cache=True, inline="always")
-def _command_one(a, p, c, mix, unmix, box, frac, thrust, u_cmd, raw):  # noqa: ANN001, ANN202
-    """Action row -> limited rotor thrusts (written) and the commanded collective input."""
-    m, k = mix.shape
+def _command_one(a, p, c, mix, unmix, box, frac, thrust, u_cmd, raw, m, k):  # noqa: ANN001, ANN202
+    """Action row -> limited rotor thrusts (written) and the commanded collective input.
+
+    ``m, k`` are the mixer's shape (inputs, rotors): constants in the generated kernels.
+    """
     mode, normalize = int(c[_MODE]), c[_NORMALIZE] != 0.0
     for j in range(a.shape[0]):
         lo, hi = box[0, j], box[1, j]
@@ -425,14 +427,14 @@ def _command_one(a, p, c, mix, unmix, box, frac, thrust, u_cmd, raw):  # noqa: A
     else:
         for i in range(k):
             thrust[i] = raw[i] if mode == 1 else p[_KT] * raw[i] * raw[i]
-        _mix_into(mix, thrust, u_cmd)
+        _mix_into(mix, thrust, u_cmd, m, k)
     for i in range(k):
         thrust[i] = min(max(thrust[i], p[_FMIN]), p[_FMAX] * frac[i])
 
 
 @numba.njit(cache=True, inline="always")
-def _mix_into(mix, thrust, u):  # noqa: ANN001, ANN202
-    m, k = mix.shape
+def _mix_into(mix, thrust, u, m, k):  # noqa: ANN001, ANN202
+    """The collective input u = mix @ thrust (``mix`` of shape (m, k))."""
     for j in range(m):
         s = 0.0
         for i in range(k):
@@ -462,8 +464,8 @@ def command_batch(A, P, C, mix, unmix, box, frac, u_app, u_cmd, work):  # noqa: 
     thrust, raw = work[5, :k], work[7, : A.shape[1]]
     for i in range(b):
         p = P[0] if P.shape[0] == 1 else P[i]
-        _command_one(A[i], p, C, mix, unmix, box, frac, thrust, u_cmd[i], raw)
-        _mix_into(mix, thrust, u_app[i])
+        _command_one(A[i], p, C, mix, unmix, box, frac, thrust, u_cmd[i], raw, m, k)
+        _mix_into(mix, thrust, u_app[i], m, k)
     return True
 
 
