@@ -25,6 +25,8 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1000, help="steps per flight")
     parser.add_argument("--sigmas", type=float, nargs="+", default=[1e-3, 1e-2],
                         help="state-noise standard deviations of the noise section")  # fmt: skip
+    parser.add_argument("--rotor-windows", type=int, nargs="+", default=[1],
+                        help="integral windows of the 6-DOF rotor-lag selection")  # fmt: skip
     parser.add_argument("--vehicles", nargs="+", choices=("crazyflie", "pelican", "other"),
                         default=["crazyflie", "pelican", "other"])  # fmt: skip
     args = parser.parse_args()
@@ -74,14 +76,18 @@ def main() -> None:
             print()
             print(d.support_lines(r))
         print("\n## 6-DOF, rotor dynamics on, rotor thrusts observed (4 flights per vehicle)\n")
-        rotors6 = [d.rotor6_study(v, steps=args.steps, label=name) for v, name in vehicles6]
+        print(f"Integral windows {args.rotor_windows} (699-term library; see docs).\n")
+        rotors6 = [
+            d.rotor6_study(v, steps=args.steps, label=name, windows=args.rotor_windows)
+            for v, name in vehicles6
+        ]
         print(d.rotor_table(rotors6))
         for r in rotors6:
             print()
             print(d.support_lines(r))
-        print(f"\nRotor equations, {rotors6[0].vehicle}:\n")
-        eqs = rotors6[0].model.equations()
-        print("\n".join(eqs[-4:]))
+        for r in rotors6:
+            print(f"\nIdentified model, {r.vehicle}:\n")
+            print("\n".join(r.model.equations()))
 
     if "noise" in args.only:
         for sigma in args.sigmas:
@@ -101,6 +107,7 @@ def main() -> None:
             for r in noisy_rotors:
                 print()
                 print(d.support_lines(r))
+                print("\n".join(r.model.equations()[-2:]))
 
 
 if __name__ == "__main__":

@@ -393,7 +393,7 @@ class RotorResult:
         support: Missed and spurious terms, worst relative coefficient error.
         tau_true: The rotor time constant [s].
         tau_found: {"T1 from T1": ..., "T1 from Tc1": ..., ...}: -1/coef of T_i and
-            1/coef of Tc_i in the equation of T_i [s].
+            1/coef of Tc_i in the equation of T_i [s] (inf where the term was not found).
         seconds: Wall time of the identification.
         rows_of_data: Rows of data used.
         sigma: Standard deviation of the state noise added to the data (0: clean).
@@ -412,6 +412,11 @@ class RotorResult:
     def worst_tau_error(self) -> float:
         """Largest relative error of the four estimates of tau."""
         return max(abs(v - self.tau_true) / self.tau_true for v in self.tau_found.values())
+
+
+def _time_constant(rate: float) -> float:
+    """1 / rate [s]; inf when the term was not found (rate 0)."""
+    return 1.0 / rate if rate != 0.0 else float("inf")
 
 
 def identify_rotors(
@@ -445,8 +450,8 @@ def rotor_study(
     model, seconds = identify_rotors(observed, n_models, seed)
     tau_found = {}
     for t, tc in zip(ROTOR_STATES, ROTOR_INPUTS, strict=True):
-        tau_found[f"{t} from {t}"] = -1.0 / coefficient(model, t, t)
-        tau_found[f"{t} from {tc}"] = 1.0 / coefficient(model, t, tc)
+        tau_found[f"{t} from {t}"] = _time_constant(-coefficient(model, t, t))
+        tau_found[f"{t} from {tc}"] = _time_constant(coefficient(model, t, tc))
     return RotorResult(
         label or (vehicle if isinstance(vehicle, str) else "custom"), model,
         check_support(model, planar_truth(params, rotors=True)), params.rotor_time_constant,
@@ -932,8 +937,8 @@ def rotor6_study(
     seconds = time.perf_counter() - start
     tau_found = {}
     for t, tc in zip(ROTOR_STATES_6DOF, ROTOR_INPUTS_6DOF, strict=True):
-        tau_found[f"{t} from {t}"] = -1.0 / coefficient(model, t, t)
-        tau_found[f"{t} from {tc}"] = 1.0 / coefficient(model, t, tc)
+        tau_found[f"{t} from {t}"] = _time_constant(-coefficient(model, t, t))
+        tau_found[f"{t} from {tc}"] = _time_constant(coefficient(model, t, tc))
     return RotorResult(
         label or (vehicle if isinstance(vehicle, str) else "custom"), model,
         check_support(model, quad6dof_effects_truth(params, rotors=True)),
