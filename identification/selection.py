@@ -35,9 +35,9 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
 6. **Uncertainty (E-SINDy).** A block bootstrap (whole blocks of rows, drawn with
    replacement) refits the chosen candidate ``n_models`` times; each coefficient's spread and
    inclusion probability go into the model; terms kept in fewer than half of the bags are
-   dropped (E-SINDy's inclusion threshold), unless the term or a near-collinear twin of it
-   (as in step 5) is in at least half: then the bags only disagree on which of two columns
-   the data cannot tell apart carries the direction.
+   dropped (E-SINDy's inclusion threshold), unless the term or a column nearly parallel to
+   it on the data (|cos| > 0.999) is in at least half: then the bags only disagree on which
+   of two columns the data cannot tell apart carries the direction.
 
 Scores, the rule and the warnings go into ``model.meta["selection"]`` (JSON-safe).
 """
@@ -559,14 +559,12 @@ def _bootstrap(
     full = Gram.stack(block_grams)
     if weak.any():
         # A term whose near-collinear twin stands in for it in the other bags is not weak:
-        # the bags disagree on which of two indistinguishable columns to use, not on whether
-        # the direction belongs to the model (dropping it lost a whole kinematic term).
-        twins: dict[int, set[int]] = {}
-        for simple, complex_, _ in collinear_pairs(full, names):
-            twins.setdefault(simple, set()).add(complex_)
-            twins.setdefault(complex_, set()).add(simple)
+        # the bags disagree on which of two columns the data cannot tell apart carries the
+        # direction (|cos| > 0.999 on the data: `sin(phi) r` / `tan(phi) r` at small tilt),
+        # not on whether it belongs to the model (dropping it lost whole kinematic terms).
+        unit = full.r / np.maximum(full.col_norms, 1e-300)
         for i, j in zip(*np.nonzero(weak), strict=True):
-            group = [j, *twins.get(int(j), ())]
+            group = np.flatnonzero(np.abs(unit.T @ unit[:, j]) > 0.999)
             if np.mean((bags_a[:, i, group] != 0).any(axis=1)) >= 0.5:
                 weak[i, j] = False
     if weak.any():
