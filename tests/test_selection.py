@@ -262,3 +262,22 @@ def test_bootstrap_keeps_a_term_whose_twin_stands_in_for_it_in_the_other_bags(mo
     assert prob[0, 0] == pytest.approx(1 / 3) and prob[0, 2] == pytest.approx(1 / 3)
     assert kept[0, 0] != 0, "u1 is carried by its twin in the other bags: kept"
     assert kept[0, 2] == 0 and any("'u2'" in n for n in notes), "u2 alone is weak: dropped"
+
+
+@pytest.mark.slow
+def test_six_dof_vehicle_with_noise_predicts_one_second_within_five_percent():
+    """sigma = 1e-3 on a non-paper 6-DOF vehicle (about 2 minutes): the support is not exact
+    (kinematic twins such as `sin(theta) u` / `cos(phi) sin(theta) u` cannot be told apart at
+    these tilts and are named in warnings), but every state is predicted 1 s ahead within 5 %
+    of its range."""
+    from identification.experiments.synthetic import OTHER_6DOF, quad6dof_flights
+    from identification.libraries import default_library
+
+    clean_trajs = quad6dof_flights(OTHER_6DOF, FlightSpec(flights=4))
+    model, report = select_model(add_noise(clean_trajs, 1e-3), default_library("quad6dof"))
+    assert any("nearly collinear" in w for w in report.warnings)
+    for tr in clean_trajs:
+        span = np.ptp(tr.x, axis=0)
+        for start in range(0, len(tr) - 100, 200):
+            pred = model.simulate(tr.x[start], tr.u[start : start + 100], tr.dt)
+            assert np.all(np.abs(pred[-1] - tr.x[start + 100]) / span < 0.05)
