@@ -101,6 +101,9 @@ class FitConfig:
         n_models: Ensemble size (``ensemble``).
         seed: Ensemble bagging seed.
         set_lam: Whether ``lam`` overrides an optimizer object's ``threshold``.
+        full_path: ``stepwise`` only: run each path to its longest support instead of
+            ending it after a few entries in a row that fail the F-test (noise). The pilot
+            that places the RK4 stage points of the selection uses the full path.
     """
 
     derivative: str | BaseDifferentiation = "rk4"
@@ -112,6 +115,7 @@ class FitConfig:
     n_models: int = 20
     seed: int = 0
     set_lam: bool = False
+    full_path: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.derivative, str) and self.derivative not in DERIVATIVES:
@@ -488,7 +492,8 @@ def solve_lambdas(
     b = gram.z / row[None, :]
     twins = simpler_twins(a, feature_names) if feature_names is not None else None
     rows = max(gram.rows, 1)
-    coef_s = stepwise_coefficients(a, b, rows, lams, simpler=twins, n_eff=rows)
+    coef_s = stepwise_coefficients(a, b, rows, lams, simpler=twins, n_eff=rows,
+                                   stop_noise=not config.full_path)  # fmt: skip
     for li, lam in enumerate(lams):
         if lam == 0:
             coef_s[li] = np.linalg.lstsq(a, b, rcond=None)[0].T

@@ -462,7 +462,8 @@ def select_model(
     pilot = None
     steps = tqdm(total=len(windows) * (k + 1), desc="selecting", disable=not progress)
     for w in windows:
-        pilot_cfg = dataclasses.replace(base, lam=pilot_lam, window=w, iterations=2)
+        pilot_cfg = dataclasses.replace(base, lam=pilot_lam, window=w, iterations=2,
+                                        full_path=True)  # fmt: skip
         pilot = fit_coefficients(units, names, pilot_cfg, pilot)
         pilots[w] = pilot
         unit_grams = grams(units, names, base.derivative if base.derivative != "rk4" else "rk4",

@@ -36,6 +36,9 @@ F_CRITICAL = 10.83
 """F(1, inf) quantile at p = 0.001: a simpler twin is entered unless the complex column gains
 more than this many residual variances over it."""
 
+INSIGNIFICANT_STEPS = 8
+"""The path stops after this many forward entries in a row that fail the F-test (noise)."""
+
 BACKWARD_FRACTION = 0.5
 """A chosen column is removed when that costs less than this fraction of the last gain (FoBa)."""
 
@@ -49,6 +52,7 @@ def stepwise_path(
     total: float | None = None,
     n_eff: float | None = None,
     floor: float = 0.0,
+    stop_noise: bool = True,
 ) -> list[tuple[tuple[int, ...], float]]:
     """The forward-backward greedy path of one target.
 
@@ -64,6 +68,8 @@ def stepwise_path(
         total: Total sum of squares of the target over the data rows (default ``|b|^2``).
         n_eff: Effective independent rows for the F-test (default: rows of ``a``).
         floor: The path stops at the first step gaining less (no threshold reads beyond).
+        stop_noise: Also stop after :data:`INSIGNIFICANT_STEPS` entries in a row that fail
+            the F-test (p = 0.001) against the residual variance.
 
     Returns:
         One entry per forward step: the support after that step (and its backward pruning),
@@ -81,6 +87,7 @@ def stepwise_path(
     complex_of = _invert(simpler or {})
     path: list[tuple[tuple[int, ...], float]] = []
     seen: set[tuple[int, ...]] = set()
+    quiet = 0
     for _ in range(4 * max_terms):  # forward steps, a few undone by backward ones
         if len(support) >= min(max_terms, p):
             break
@@ -102,6 +109,15 @@ def stepwise_path(
         j = int(np.argmax(gains))
         gain = float(gains[j])
         if gain <= 0 or gain < floor:
+            path.append((tuple(sorted(support)), gain))
+            break
+        # Past INSIGNIFICANT_STEPS entries in a row that are not significant (F-test at
+        # p = 0.001 against the residual variance) the path only fits noise: stop there.
+        # (One alone is not enough: the first of a cancelling pair, `1` then `cos(phi) u1`
+        # in z_dot', gains little until its partner enters.)
+        sigma2_now = (outside + float(resid @ resid)) / max(n_rows - len(support) - 1, 1.0)
+        quiet = quiet + 1 if gain < F_CRITICAL * sigma2_now else 0
+        if stop_noise and quiet > INSIGNIFICANT_STEPS:
             path.append((tuple(sorted(support)), gain))
             break
         twins = [k for k in (simpler or {}).get(j, ()) if ok[k]]
@@ -245,6 +261,7 @@ def stepwise_coefficients(
     max_terms: int | None = None,
     simpler: dict[int, list[int]] | None = None,
     n_eff: float | None = None,
+    stop_noise: bool = True,
 ) -> np.ndarray:
     """Scaled coefficients of every target at every threshold (one path per target).
 
@@ -256,6 +273,8 @@ def stepwise_coefficients(
         max_terms: Largest support per target (default: ``min(p, 64)``).
         simpler: Simpler near-collinear twins of each column (see :func:`stepwise_path`).
         n_eff: Effective independent rows for the twin F-test (default: ``rows``).
+        stop_noise: End each path after a few insignificant entries (see
+            :func:`stepwise_path`).
 
     Returns:
         Shape (len(lams), targets, p), least-squares refits on each support.
@@ -267,7 +286,7 @@ def stepwise_coefficients(
     floor = min(positive) ** 2 * rows if positive and len(positive) == len(lams) else 0.0
     for i in range(b.shape[1]):
         path = stepwise_path(a, b[:, i], max_terms, simpler=simpler, total=float(rows),
-                             n_eff=n_eff or rows, floor=floor)  # fmt: skip
+                             n_eff=n_eff or rows, floor=floor, stop_noise=stop_noise)  # fmt: skip
         refits: dict[tuple[int, ...], np.ndarray] = {}
         for li, lam in enumerate(lams):
             support = support_at(path, float(lam) ** 2 * rows) if lam > 0 else _last(path)

@@ -281,3 +281,17 @@ def test_six_dof_vehicle_with_noise_predicts_one_second_within_five_percent():
         for start in range(0, len(tr) - 100, 200):
             pred = model.simulate(tr.x[start], tr.u[start : start + 100], tr.dt)
             assert np.all(np.abs(pred[-1] - tr.x[start + 100]) / span < 0.05)
+
+
+def test_stepwise_path_ends_in_noise_but_keeps_every_significant_term():
+    from identification.stepwise import INSIGNIFICANT_STEPS, stepwise_path
+
+    rng = np.random.default_rng(5)
+    a = rng.standard_normal((3000, 60))
+    b = a[:, 3] - 0.5 * a[:, 17] + 0.05 * a[:, 40] + 0.1 * rng.standard_normal(3000)
+    full = stepwise_path(a, b, 60, stop_noise=False)
+    short = stepwise_path(a, b, 60)
+    assert len(full) >= 55  # without the stop: noise columns until the longest support
+    assert len(short) <= 3 + INSIGNIFICANT_STEPS + 1
+    assert {3, 17, 40} <= set(short[2][0])  # the significant terms come first
+    assert short == full[: len(short) - 1] + [short[-1]]  # the same path, cut
