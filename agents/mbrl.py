@@ -182,9 +182,11 @@ def sindy_job(config: MBRLConfig, seed: int) -> dict[str, Any]:
             truth.spec.max_episode_steps or 1000,
         )  # fmt: skip
         if agent is None:
-            agent = make_algo(config.algo, surrogate, seed)
+            agent = make_algo(config.algo, surrogate, seed)  # seeds the surrogate too
         else:
             agent.set_env(surrogate)
+            # A new env is unseeded: its first reset would draw the start from OS entropy.
+            agent.env.seed(seed + 7919 * iteration)
         agent.learn(config.model_steps_per_iteration, reset_num_timesteps=False)
         mean, std = evaluate(
             SB3Policy(agent), config.env_id, config.eval_episodes, **config.truth_kwargs
@@ -224,10 +226,18 @@ def model_free_job(config: MBRLConfig, seed: int, out: str) -> dict[str, Any]:
 
 
 def run_job(method: str, config: MBRLConfig, seed: int, out: str) -> dict[str, Any]:
-    """One (method, seed) job of an experiment: ``sindy`` or ``model_free``."""
-    if method == "sindy":
-        return sindy_job(config, seed)
-    return model_free_job(config, seed, out)
+    """One (method, seed) job of an experiment: ``sindy`` or ``model_free``.
+
+    BLAS and OpenMP run on one thread inside a job, as on a Ray worker (Ray sets
+    ``OMP_NUM_THREADS=1``): a multi-threaded BLAS sums in another order, and the same seed
+    then gives other floating-point results in process than on Ray.
+    """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        if method == "sindy":
+            return sindy_job(config, seed)
+        return model_free_job(config, seed, out)
 
 
 def steps_to_reach(curve: list[dict[str, Any]], target: float) -> int | None:
