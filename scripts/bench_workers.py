@@ -9,6 +9,7 @@ Needs the optional Ray extra (``pip install 'quad-sindy[ray]'``).
 """
 
 import argparse
+import dataclasses
 import os
 import time
 
@@ -26,10 +27,17 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--jobs", type=int, default=4)
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument(
+        "--model-steps",
+        type=int,
+        default=CONFIG.model_steps_per_iteration,
+        help="surrogate training steps per iteration (longer jobs)",
+    )
     args = parser.parse_args()
+    config = dataclasses.replace(CONFIG, model_steps_per_iteration=args.model_steps)
     if not ray_available():
         raise SystemExit("error: this benchmark needs Ray: pip install 'quad-sindy[ray]'")
-    jobs = [("sindy", CONFIG, seed, "out/bench_workers") for seed in range(args.jobs)]
+    jobs = [("sindy", config, seed, "out/bench_workers") for seed in range(args.jobs)]
     print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     t0 = time.perf_counter()
     serial = run_jobs(run_job, jobs, workers=1)
