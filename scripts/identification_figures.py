@@ -145,10 +145,10 @@ def main() -> None:
     model, report = select_model(clean6, quad6dof_library(), config=config)
     row("ours: 6-DOF m=0.8 clean, RK4", model, truth_quad6dof(OTHER_6DOF),
         quad6dof_drag_rhs(OTHER_6DOF, 0.0), clean6, time.perf_counter() - t0, report)  # fmt: skip
-    if args.noisy_6dof:
+    for sigma in (1e-3, 1e-2) if args.noisy_6dof else ():
         t0 = time.perf_counter()
-        model, report = select_model(add_noise(clean6, 1e-3), quad6dof_library(), config=config)
-        row("ours: 6-DOF m=0.8 sigma=1e-3", model, truth_quad6dof(OTHER_6DOF),
+        model, report = select_model(add_noise(clean6, sigma), quad6dof_library(), config=config)
+        row(f"ours: 6-DOF m=0.8 sigma={sigma:g}", model, truth_quad6dof(OTHER_6DOF),
             quad6dof_drag_rhs(OTHER_6DOF, 0.0), clean6, time.perf_counter() - t0,
             report)  # fmt: skip
 
