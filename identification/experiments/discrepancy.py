@@ -219,23 +219,59 @@ def rotor_flights(
         action_mode="rotor_thrusts",
         duration=steps * 0.01 + 1.0,
     )
-    pd = PlanarPD(params, gains)
-    mixer = params.mixer
+
+    def reference(rng: np.random.Generator, ep: int) -> Any:
+        return RandomWaypoints.sample(
+            rng, ndim=2, num_waypoints=int(steps * 0.01 / 1.5) + 2, low=(-1.5, 0.5),
+            high=(1.5, 2.0), segment_time=1.5,
+        )  # fmt: skip
+
+    names = (RIGID_STATES, ROTOR_STATES, ROTOR_INPUTS, ("u1", "u2"))
+    meta = {"env": ENV_ID, "rotor_dynamics": rotor_dynamics}
+    return _rotor_mode_flights(env, PlanarPD(params, gains), params.mixer, reference, names,
+                               episodes, steps, seed, noise, rotor_dynamics, meta)  # fmt: skip
+
+
+def _rotor_mode_flights(
+    env: Any,
+    pd: Any,
+    mixer: np.ndarray,
+    reference: Any,
+    names: tuple[Sequence[str], Sequence[str], Sequence[str], Sequence[str]],
+    episodes: int,
+    steps: int,
+    seed: int,
+    noise: float,
+    rotor_dynamics: bool,
+    meta: dict[str, Any],
+) -> RotorFlights:
+    """The flight loop of :func:`rotor_flights` and :func:`quad6dof_flights` (closes ``env``).
+
+    Args:
+        env: An env in the per-rotor action mode.
+        pd: The vehicle's PD: (state, reference) -> collective command.
+        mixer: Rotor thrusts -> collective input.
+        reference: (rng, episode) -> the episode's reference, drawn from the flights' rng.
+        names: Rigid states, rotor states, rotor inputs, collective inputs.
+        episodes: Flights to try (those ending before 50 steps are skipped).
+        steps: Steps per flight.
+        seed: Seed of the flights' rng (references, input noise) and of the env resets.
+        noise: Input noise per rotor, as a fraction of the rotor box's half-width.
+        rotor_dynamics: Whether the rotors lag (their thrusts are then recorded).
+        meta: Stored with each flight (its seed added).
+    """
+    rigid, rotors, rotor_inputs, collective = names
     unmix = np.linalg.inv(mixer)
     low, high = env.action_space.low.astype(float), env.action_space.high.astype(float)
     half = 0.5 * (high - low)
     rng = np.random.default_rng(seed)
     observed, hidden = [], []
     for ep in range(episodes):
-        ref = RandomWaypoints.sample(
-            rng, ndim=2, num_waypoints=int(steps * 0.01 / 1.5) + 2, low=(-1.5, 0.5),
-            high=(1.5, 2.0), segment_time=1.5,
-        )  # fmt: skip
-        _, info = env.reset(seed=seed + ep, options={"trajectory": ref})
+        _, info = env.reset(seed=seed + ep, options={"trajectory": reference(rng, ep)})
         ts, xs, thrusts, commands = [], [], [], []
         for _ in range(steps):
             command = unmix @ pd(info["state"], info["reference"])
-            command = np.clip(command + noise * half * rng.standard_normal(2), low, high)
+            command = np.clip(command + noise * half * rng.standard_normal(low.size), low, high)
             command = command.astype(env.action_space.dtype).astype(float)  # what is applied
             ts.append(info["time"])
             xs.append(info["state"])
@@ -247,18 +283,10 @@ def rotor_flights(
         if len(ts) < 50:
             continue
         t, x, tc = np.array(ts), np.array(xs), np.array(commands)
-        meta = {"env": ENV_ID, "seed": seed + ep, "rotor_dynamics": rotor_dynamics}
-        observed.append(
-            Trajectory(
-                t,
-                np.hstack([x, np.array(thrusts)]),
-                tc,
-                (*RIGID_STATES, *ROTOR_STATES),
-                ROTOR_INPUTS,
-                meta=meta,
-            )  # fmt: skip
-        )
-        hidden.append(Trajectory(t, x, tc @ mixer.T, RIGID_STATES, ("u1", "u2"), meta=meta))
+        flight = {**meta, "seed": seed + ep}
+        observed.append(Trajectory(t, np.hstack([x, np.array(thrusts)]), tc, (*rigid, *rotors),
+                                   rotor_inputs, meta=flight))  # fmt: skip
+        hidden.append(Trajectory(t, x, tc @ mixer.T, rigid, collective, meta=flight))
     env.close()
     return RotorFlights(observed, hidden)
 
@@ -746,51 +774,18 @@ def quad6dof_flights(
         action_mode="rotor_thrusts",
         duration=steps * 0.01 + 1.0,
     )
-    pd = Quad6DOFPD(params, gains)
-    mixer = params.mixer
-    unmix = np.linalg.inv(mixer)
-    low, high = env.action_space.low.astype(float), env.action_space.high.astype(float)
-    half = 0.5 * (high - low)
-    rng = np.random.default_rng(seed)
-    observed, hidden = [], []
-    for ep in range(episodes):
-        ref = RandomWaypoints.sample(
+
+    def reference(rng: np.random.Generator, ep: int) -> Any:
+        return RandomWaypoints.sample(
             rng, ndim=3, num_waypoints=int(steps * 0.01 / 1.5) + 2,
             low=(-span, -span, 1.0 - 0.5 * span), high=(span, span, 1.0 + 0.5 * span),
             segment_time=1.5, yaw_amplitude=1.0, yaw_period=10.0 + ep,
         )  # fmt: skip
-        _, info = env.reset(seed=seed + ep, options={"trajectory": ref})
-        ts, xs, thrusts, commands = [], [], [], []
-        for _ in range(steps):
-            command = unmix @ pd(info["state"], info["reference"])
-            command = np.clip(command + noise * half * rng.standard_normal(4), low, high)
-            command = command.astype(env.action_space.dtype).astype(float)  # what is applied
-            ts.append(info["time"])
-            xs.append(info["state"])
-            thrusts.append(info["rotor_thrusts"] if rotor_dynamics else command)
-            commands.append(command)
-            _, _, terminated, truncated, info = env.step(command.astype(env.action_space.dtype))
-            if terminated or truncated:
-                break
-        if len(ts) < 50:
-            continue
-        t, x, tc = np.array(ts), np.array(xs), np.array(commands)
-        meta = {"env": ENV_6DOF, "seed": seed + ep, "drag": drag, "rotor_dynamics": rotor_dynamics}
-        observed.append(
-            Trajectory(
-                t,
-                np.hstack([x, np.array(thrusts)]),
-                tc,
-                (*QUAD6DOF_STATE_NAMES, *ROTOR_STATES_6DOF),
-                ROTOR_INPUTS_6DOF,
-                meta=meta,
-            )  # fmt: skip
-        )
-        hidden.append(
-            Trajectory(t, x, tc @ mixer.T, QUAD6DOF_STATE_NAMES, QUAD6DOF_INPUT_NAMES, meta=meta)
-        )
-    env.close()
-    return RotorFlights(observed, hidden)
+
+    names = (QUAD6DOF_STATE_NAMES, ROTOR_STATES_6DOF, ROTOR_INPUTS_6DOF, QUAD6DOF_INPUT_NAMES)
+    meta = {"env": ENV_6DOF, "drag": drag, "rotor_dynamics": rotor_dynamics}
+    return _rotor_mode_flights(env, Quad6DOFPD(params, gains), params.mixer, reference, names,
+                               episodes, steps, seed, noise, rotor_dynamics, meta)  # fmt: skip
 
 
 def max_tilt(trajs: Sequence[Trajectory]) -> tuple[float, float]:
