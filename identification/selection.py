@@ -36,8 +36,10 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
    replacement) refits the chosen candidate ``n_models`` times; each coefficient's spread and
    inclusion probability go into the model; terms kept in fewer than half of the bags are
    dropped (E-SINDy's inclusion threshold), unless the term or a column nearly parallel to
-   it on the data (|cos| > 0.999) is in at least half: then the bags only disagree on which
-   of two columns the data cannot tell apart carries the direction.
+   it on the data (|cos| > 0.999) is in at least half (the bags then only disagree on which
+   of two columns the data cannot tell apart carries the direction), or its removal alone
+   fails the F-test on all data (p = 0.001: one of a cancelling pair such as gravity and
+   thrust, spread by the bags over many near twins).
 
 Scores, the rule and the warnings go into ``model.meta["selection"]`` (JSON-safe).
 """
@@ -568,6 +570,21 @@ def _bootstrap(
             group = np.flatnonzero(np.abs(unit.T @ unit[:, j]) > 0.999)
             if np.mean((bags_a[:, i, group] != 0).any(axis=1)) >= 0.5:
                 weak[i, j] = False
+    if weak.any():
+        # Nor is a term whose removal alone the full data reject (F-test, p = 0.001): one of a
+        # cancelling pair (gravity and thrust in w') whose columns the bags spread over many
+        # twins is weak in every bag and still carries a force the fit cannot do without.
+        a, z = full.r, full.z
+        total = np.linalg.norm(full.r_aug[:, full.p :], axis=0) ** 2
+        for i in np.unique(np.nonzero(weak)[0]):
+            support = list(np.flatnonzero(xi[i]))
+            rss = _rss(a, z[:, i], support)[0]
+            outside = max(total[i] - float(z[:, i] @ z[:, i]), 0.0)
+            sigma2 = (rss + outside) / max(float(full.rows) - len(support), 1.0)
+            for j in np.flatnonzero(weak[i]):
+                trial = [c for c in support if c != j]
+                if _rss(a, z[:, i], trial)[0] - rss > F_CRITICAL * sigma2:
+                    weak[i, j] = False
     if weak.any():
         a, z = full.r, full.z
         xi = xi.copy()

@@ -295,3 +295,31 @@ def test_stepwise_path_ends_in_noise_but_keeps_every_significant_term():
     assert len(short) <= 3 + INSIGNIFICANT_STEPS + 1
     assert {3, 17, 40} <= set(short[2][0])  # the significant terms come first
     assert short == full[: len(short) - 1] + [short[-1]]  # the same path, cut
+
+
+def test_bootstrap_keeps_a_weak_term_the_full_data_cannot_do_without(monkeypatch):
+    """A term in under half of the bags is still kept when removing it alone fails the F-test
+    on all data (one of a cancelling pair spread over twins); a term the data do not need is
+    dropped."""
+    import identification.selection as selection
+
+    rng = np.random.default_rng(4)
+    t = np.arange(600) * 0.01
+    u = np.column_stack([1.0 + 0.3 * rng.standard_normal(600), rng.standard_normal(600)])
+    phi = np.concatenate([[0.0], np.cumsum(0.5 * u[:-1, 1] * 0.01)])[:, None]  # phi' = u2 / 2
+    traj = Trajectory(t, phi, u, ("phi",), ("u1", "u2"), meta={})
+    names = ["u1", "cos(phi) u1", "u2", "phi"]
+    draws = iter(range(100))
+
+    def bag(gram, config, feature_names=None):  # u2 and phi in 1 bag of 3 each
+        row = np.zeros((1, 4))
+        if next(draws) % 3 == 0:
+            row[0, 2:] = 0.5, 1e-3
+        return row
+
+    monkeypatch.setattr(selection, "solve", bag)
+    xi = np.array([[0.0, 0.0, 0.5, 1e-3]])
+    kept, _, prob, notes = selection._bootstrap([traj], names, FitConfig(window=1), xi, 9, 0)
+    assert prob[0, 2] == pytest.approx(1 / 3) and prob[0, 3] == pytest.approx(1 / 3)
+    assert kept[0, 2] == pytest.approx(0.5, rel=1e-6), "the data need u2: kept"
+    assert kept[0, 3] == 0 and any("'phi'" in n for n in notes), "phi' does not need phi"
