@@ -332,6 +332,20 @@ def _uniform(bits: Any) -> float:
 
 
 @numba.njit(cache=True, inline="always")
+def _zig_box(bits: Any) -> tuple[float, bool]:
+    """The ziggurat's candidate from 64 bits, and whether it lies inside its layer's box.
+
+    Bits 0-7 pick the layer, bit 8 the sign, bits 9-60 the magnitude (as numpy's ziggurat).
+    """
+    magnitude = (bits >> np.uint64(9)) & np.uint64(0xFFFFFFFFFFFFF)
+    layer = int(bits & np.uint64(0xFF))
+    x = float(np.int64(magnitude)) * _ZIG_W[layer]
+    if bits & np.uint64(0x100):
+        x = -x
+    return x, magnitude < _ZIG_K[layer]
+
+
+@numba.njit(cache=True, inline="always")
 def _normal_rare(z: Any, bits: Any, x: float) -> tuple[float, Any]:
     """The ziggurat's rare branches (~1 % of draws): the tail, a wedge, or a new draw.
 
@@ -352,12 +366,8 @@ def _normal_rare(z: Any, bits: Any, x: float) -> tuple[float, Any]:
             return x, z
         z += _GOLDEN
         bits = _mix64(z)
-        magnitude = (bits >> np.uint64(9)) & np.uint64(0xFFFFFFFFFFFFF)
-        layer = int(bits & np.uint64(0xFF))
-        x = float(np.int64(magnitude)) * _ZIG_W[layer]
-        if bits & np.uint64(0x100):
-            x = -x
-        if magnitude < _ZIG_K[layer]:
+        x, fast = _zig_box(bits)
+        if fast:
             return x, z
 
 
@@ -370,12 +380,8 @@ def _normal(z: Any) -> tuple[float, Any]:
     """
     z += _GOLDEN
     bits = _mix64(z)
-    magnitude = (bits >> np.uint64(9)) & np.uint64(0xFFFFFFFFFFFFF)
-    layer = int(bits & np.uint64(0xFF))
-    x = float(np.int64(magnitude)) * _ZIG_W[layer]
-    if bits & np.uint64(0x100):
-        x = -x
-    if magnitude < _ZIG_K[layer]:
+    x, fast = _zig_box(bits)
+    if fast:
         return x, z
     return _normal_rare(z, bits, x)
 
