@@ -291,6 +291,19 @@ def _rss(a: np.ndarray, b: np.ndarray, cols: list[int]) -> tuple[float, np.ndarr
     return float(resid @ resid), coef
 
 
+def _residual_variance(gram: Gram, i: int, support: Sequence[int]) -> tuple[float, float]:
+    """RSS of equation ``i`` on ``support``, and its residual variance for the F-tests.
+
+    The variance counts the residual left outside the p-dimensional range of R (total minus
+    explained) and every row as an effective sample (under white measurement noise the
+    targets of neighbouring rows share no sample).
+    """
+    rss = _rss(gram.r, gram.z[:, i], list(support))[0]
+    total = float(np.linalg.norm(gram.r_aug[:, gram.p + i]) ** 2)
+    outside = max(total - float(gram.z[:, i] @ gram.z[:, i]), 0.0)
+    return rss, (rss + outside) / max(max(float(gram.rows), 2.0) - len(support), 1.0)
+
+
 def resolve_collinear(
     xi: np.ndarray,
     gram: Gram,
@@ -307,8 +320,6 @@ def resolve_collinear(
     if not pairs:
         return xi, []
     a, z = gram.r, gram.z
-    rss_floor = np.linalg.norm(gram.r_aug[:, gram.p :], axis=0) ** 2  # total, for the bound
-    n_eff = max(float(gram.rows), 2.0)  # see effective_rows
     xi = xi.copy()
     notes = []
     for i, state in enumerate(state_names):
@@ -319,11 +330,8 @@ def resolve_collinear(
             trial = [c for c in support if c != complex_]
             if simple not in trial:
                 trial.append(simple)
-            rss, _ = _rss(a, z[:, i], support)
+            rss, sigma2 = _residual_variance(gram, i, support)
             rss_new, _ = _rss(a, z[:, i], trial)
-            # residual left outside the p-dimensional range of R: (total - explained)
-            outside = max(rss_floor[i] - float(z[:, i] @ z[:, i]), 0.0)
-            sigma2 = (rss + outside) / max(n_eff - len(support), 1.0)
             if (rss_new - rss) <= F_CRITICAL * sigma2:
                 support = sorted(trial)
                 kept = "both" if simple in np.flatnonzero(xi[i]) else "the complex one"
@@ -359,16 +367,12 @@ def indistinguishable_twins(
     if not pairs:
         return []
     a, z = gram.r, gram.z
-    total = np.linalg.norm(gram.r_aug[:, gram.p :], axis=0) ** 2
-    n_eff = max(float(gram.rows), 2.0)  # see effective_rows
     notes = []
     for i, state in enumerate(state_names):
         support = list(np.flatnonzero(xi[i]))
         if not support:
             continue
-        rss, _ = _rss(a, z[:, i], support)
-        outside = max(total[i] - float(z[:, i] @ z[:, i]), 0.0)
-        sigma2 = (rss + outside) / max(n_eff - len(support), 1.0)
+        rss, sigma2 = _residual_variance(gram, i, support)
         for simple, complex_, cosine in pairs:
             for kept, other in ((simple, complex_), (complex_, simple)):
                 if kept not in support or other in support:
@@ -574,16 +578,12 @@ def _bootstrap(
         # Nor is a term whose removal alone the full data reject (F-test, p = 0.001): one of a
         # cancelling pair (gravity and thrust in w') whose columns the bags spread over many
         # twins is weak in every bag and still carries a force the fit cannot do without.
-        a, z = full.r, full.z
-        total = np.linalg.norm(full.r_aug[:, full.p :], axis=0) ** 2
         for i in np.unique(np.nonzero(weak)[0]):
             support = list(np.flatnonzero(xi[i]))
-            rss = _rss(a, z[:, i], support)[0]
-            outside = max(total[i] - float(z[:, i] @ z[:, i]), 0.0)
-            sigma2 = (rss + outside) / max(float(full.rows) - len(support), 1.0)
+            rss, sigma2 = _residual_variance(full, i, support)
             for j in np.flatnonzero(weak[i]):
                 trial = [c for c in support if c != j]
-                if _rss(a, z[:, i], trial)[0] - rss > F_CRITICAL * sigma2:
+                if _rss(full.r, full.z[:, i], trial)[0] - rss > F_CRITICAL * sigma2:
                     weak[i, j] = False
     if weak.any():
         a, z = full.r, full.z
