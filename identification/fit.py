@@ -492,8 +492,10 @@ def solve_lambdas(
     b = gram.z / row[None, :]
     twins = simpler_twins(a, feature_names) if feature_names is not None else None
     rows = max(gram.rows, 1)
+    # the pilot (full path) only places stage points: no replacement search there
     coef_s = stepwise_coefficients(a, b, rows, lams, simpler=twins, n_eff=rows,
-                                   stop_noise=not config.full_path)  # fmt: skip
+                                   stop_noise=not config.full_path,
+                                   replace=not config.full_path)  # fmt: skip
     for li, lam in enumerate(lams):
         if lam == 0:
             coef_s[li] = np.linalg.lstsq(a, b, rcond=None)[0].T

@@ -78,6 +78,10 @@ WINDOWS: tuple[int, ...] = (1, 4, 16, 64)
 """Integral windows tried by default (1: clean data; longer: noise; a window of a quarter of the
 shortest trajectory or more is skipped). 64 lets the validation average sigma = 1e-2 noise.."""
 
+BAG_T = 2.0
+"""A kept term's coefficient must exceed this many bootstrap standard deviations, or the full
+data must reject its removal (F-test), to stay in the model."""
+
 F_CRITICAL = 10.83
 """F(1, inf) quantile at p = 0.001: a swap to the simpler term of a near-collinear pair is
 refused when the residual grows by more than this many residual variances."""
@@ -574,6 +578,9 @@ def _bootstrap(
             group = np.flatnonzero(np.abs(unit.T @ unit[:, j]) > 0.999)
             if np.mean((bags_a[:, i, group] != 0).any(axis=1)) >= 0.5:
                 weak[i, j] = False
+    # A term the bags hold but whose coefficient they spread across zero (|coefficient| under
+    # BAG_T bootstrap deviations) is weak too, unless the full data need it (F-test below).
+    weak |= (xi != 0) & (np.abs(xi) < BAG_T * std)
     if weak.any():
         # Nor is a term whose removal alone the full data reject (F-test, p = 0.001): one of a
         # cancelling pair (gravity and thrust in w') whose columns the bags spread over many
@@ -585,6 +592,7 @@ def _bootstrap(
                 trial = [c for c in support if c != j]
                 if _rss(full.r, full.z[:, i], trial)[0] - rss > F_CRITICAL * sigma2:
                     weak[i, j] = False
+    xi_in = xi
     if weak.any():
         a, z = full.r, full.z
         xi = xi.copy()
@@ -596,5 +604,6 @@ def _bootstrap(
             xi[i] = row
         for i, j in zip(*np.nonzero(weak), strict=True):
             notes.append(f"dropped term {names[j]!r} of equation {i}: kept in {prob[i, j]:.0%} "
-                         "of bootstrap fits")  # fmt: skip
+                         f"of bootstrap fits, coefficient {xi_in[i, j]:.3g} +- {std[i, j]:.2g}, "
+                         "and the data do not need it (F-test)")  # fmt: skip
     return xi, std, prob, notes

@@ -13,6 +13,15 @@ the residual sum of squares of any subset of columns is cheap. The path starts e
   half the gain of that addition (FoBa, Zhang 2011), so an early choice that a later pair of
   columns explains better is undone.
 
+Every support read off the path is then **refined by replacement** (Miller's sequential
+replacement for best subsets): a chosen column is exchanged for the column outside that lowers
+the residual sum of squares most, as long as the drop is significant with the number of
+exchanges tried counted (F-test at p = 0.001, Bonferroni over every chosen column times every
+candidate). Greedy entry can settle on one column that stands for two true ones at small
+tilt (``tan(phi) r`` for ``tan(phi) cos(theta) r`` beside ``tan(phi) sin(theta) p``); the
+exchange undoes that when the data say so, and a noise fit of a few hundred candidates does
+not pass the corrected bar.
+
 The stopping rule is the same scaled threshold ``lam`` as thresholded least squares: the
 path stops when the next column would explain less than ``lam`` of the target's RMS (gain
 below ``lam^2 n``). For unit-RMS orthogonal columns this is exactly a threshold on the
@@ -38,6 +47,9 @@ more than this many residual variances over it."""
 
 INSIGNIFICANT_STEPS = 8
 """The path stops after this many forward entries in a row that fail the F-test (noise)."""
+
+REPLACE_P = 1e-3
+"""Significance of one replacement, before the Bonferroni correction for the exchanges tried."""
 
 BACKWARD_FRACTION = 0.5
 """A chosen column is removed when that costs less than this fraction of the last gain (FoBa)."""
@@ -243,6 +255,151 @@ def _swap_twins(
     return changed
 
 
+def replace_terms(
+    a: np.ndarray,
+    b: np.ndarray,
+    support: Sequence[int],
+    outside: float,
+    n_rows: float,
+    tol: float = COLLINEAR_TOL,
+) -> tuple[int, ...]:
+    """Sequential replacement: exchanges chosen columns while the data significantly prefer it.
+
+    Each round finds, over every chosen column and every column outside, the exchange that
+    lowers the residual sum of squares most (closed form, as in :func:`_swap_twins`) and makes
+    it when the drop exceeds the chi-square(1) bar at :data:`REPLACE_P` divided by the number
+    of exchanges tried, in residual variances. The support size never changes, so the
+    threshold keeps its meaning; only which columns carry it does.
+
+    Args:
+        a: Scaled regression matrix.
+        b: Scaled target.
+        support: Chosen columns.
+        outside: Residual sum of squares outside the rows of ``a`` (see :class:`Gram`).
+        n_rows: Effective independent rows for the test.
+        tol: Collinearity tolerance: a column in the span of the others is never entered.
+
+    Returns:
+        The refined support, sorted.
+    """
+    from scipy.stats import chi2
+
+    support = list(support)
+    if not support or len(support) >= a.shape[1]:
+        return tuple(sorted(support))
+    norms2 = np.einsum("ij,ij->j", a, a)
+    bar = float(chi2.isf(REPLACE_P / (len(support) * (a.shape[1] - len(support))), 1))
+    seen = {tuple(sorted(support))}
+    for _ in range(4 * len(support)):
+        q, r = np.linalg.qr(a[:, support])
+        g = np.linalg.inv(r).T
+        v = q @ (g / np.linalg.norm(g, axis=0))  # the direction each chosen column alone adds
+        perp = a - q @ (q.T @ a)
+        resid = b - q @ (q.T @ b)
+        perp2 = np.einsum("ij,ij->j", perp, perp)
+        pr = perp.T @ resid
+        va = v.T @ a
+        vb = v.T @ b
+        rss = outside + float(resid @ resid)
+        sigma2 = rss / max(n_rows - len(support), 1.0)
+        p2 = perp2[None, :] + va**2  # (chosen position, candidate): its part outside the rest
+        dot = pr[None, :] + va * vb[:, None]
+        valid = p2 > tol * norms2[None, :]
+        valid[:, support] = False
+        drop = np.where(valid, dot**2 / np.maximum(p2, 1e-300), -np.inf) - (vb**2)[:, None]
+        pos, col = np.unravel_index(int(np.argmax(drop)), drop.shape)
+        if not drop[pos, col] > bar * sigma2:
+            break
+        support[pos] = int(col)
+        key = tuple(sorted(support))
+        if key in seen:
+            break
+        seen.add(key)
+    return _exchange_pairs(a, b, support, outside, n_rows, tol)
+
+
+PAIR_COSINE = 0.99
+"""Near twins for the paired exchange of :func:`_exchange_pairs` (|cos| on the data)."""
+
+
+def _exchange_pairs(
+    a: np.ndarray,
+    b: np.ndarray,
+    support: list[int],
+    outside: float,
+    n_rows: float,
+    tol: float = COLLINEAR_TOL,
+) -> tuple[int, ...]:
+    """Exchanges two chosen columns at once for near twins of each, when significant.
+
+    A cancelling pair (gravity and thrust in ``w'``: ``cos(phi) cos(theta)`` and ``u1``) can be
+    held as a pair of near twins with a common factor (``cos(psi) cos(theta)`` and
+    ``sec(phi) cos(psi) u1``): exchanging either alone breaks the balance, so single
+    replacements never leave it. Here two chosen columns nearly parallel to each other (a pair
+    that can cancel) are exchanged together, each for a column within |cos| >
+    :data:`PAIR_COSINE` of it, under the same Bonferroni-corrected F-test.
+    """
+    from scipy.stats import chi2
+
+    if len(support) < 2:
+        return tuple(sorted(support))
+    unit = a / np.maximum(np.linalg.norm(a, axis=0), 1e-300)
+    norms2 = np.einsum("ij,ij->j", a, a)
+    for _ in range(2 * len(support)):
+        cos = np.abs(unit.T @ unit[:, support])  # (p, chosen)
+        near = cos > PAIR_COSINE
+        near[support, :] = False
+        options = [np.flatnonzero(near[:, k]) for k in range(len(support))]
+        # only chosen pairs that can cancel: nearly parallel to each other on the data
+        pairs = [
+            (i, j)
+            for i in range(len(support))
+            for j in range(i + 1, len(support))
+            if cos[support[j], i] > PAIR_COSINE and options[i].size and options[j].size
+        ]
+        if not pairs:
+            break
+        q = np.linalg.qr(a[:, support])[0]
+        rss = outside + float(b @ b) - float(np.sum((q.T @ b) ** 2))
+        sigma2 = rss / max(n_rows - len(support), 1.0)
+        tried = sum(options[i].size * options[j].size for i, j in pairs)
+        bar = float(chi2.isf(REPLACE_P / tried, 1)) * sigma2
+        best, best_drop = None, bar
+        for i, j in pairs:
+            rest = [c for k, c in enumerate(support) if k not in (i, j)]
+            q = np.linalg.qr(a[:, rest])[0] if rest else np.zeros((a.shape[0], 0))
+            resid = b - q @ (q.T @ b)
+            ci, cj = options[i], options[j]
+            pi = a[:, ci] - q @ (q.T @ a[:, ci])
+            pj = a[:, cj] - q @ (q.T @ a[:, cj])
+            # RSS with (ci, cj) in place of the pair: project the residual on their 2-D span
+            gii = np.einsum("ij,ij->j", pi, pi)[:, None]
+            gjj = np.einsum("ij,ij->j", pj, pj)[None, :]
+            gij = pi.T @ pj
+            di = (pi.T @ resid)[:, None]
+            dj = (pj.T @ resid)[None, :]
+            det = gii * gjj - gij**2
+            valid = (
+                (det > tol * norms2[ci][:, None] * norms2[cj][None, :])
+                & (gii > tol * norms2[ci][:, None])
+                & (gjj > tol * norms2[cj][None, :])
+                & (ci[:, None] != cj[None, :])
+            )
+            with np.errstate(divide="ignore", invalid="ignore"):
+                gain = (gjj * di**2 - 2 * gij * di * dj + gii * dj**2) / det
+            rss_pair = outside + float(resid @ resid) - np.where(valid, gain, -np.inf)
+            k = np.unravel_index(int(np.argmin(rss_pair)), rss_pair.shape)
+            drop = rss - float(rss_pair[k])
+            if drop > best_drop:
+                trial = list(support)
+                trial[i], trial[j] = int(ci[k[0]]), int(cj[k[1]])
+                best, best_drop = trial, drop
+        if best is None:
+            break
+        support = best
+    return tuple(sorted(support))
+
+
 def support_at(path: Sequence[tuple[tuple[int, ...], float]], floor: float) -> tuple[int, ...]:
     """The support where the path stops: before the first step gaining less than ``floor``."""
     support: tuple[int, ...] = ()
@@ -262,6 +419,7 @@ def stepwise_coefficients(
     simpler: dict[int, list[int]] | None = None,
     n_eff: float | None = None,
     stop_noise: bool = True,
+    replace: bool = True,
 ) -> np.ndarray:
     """Scaled coefficients of every target at every threshold (one path per target).
 
@@ -275,6 +433,7 @@ def stepwise_coefficients(
         n_eff: Effective independent rows for the twin F-test (default: ``rows``).
         stop_noise: End each path after a few insignificant entries (see
             :func:`stepwise_path`).
+        replace: Refine each support read off the path by :func:`replace_terms`.
 
     Returns:
         Shape (len(lams), targets, p), least-squares refits on each support.
@@ -288,10 +447,17 @@ def stepwise_coefficients(
         path = stepwise_path(a, b[:, i], max_terms, simpler=simpler, total=float(rows),
                              n_eff=n_eff or rows, floor=floor, stop_noise=stop_noise)  # fmt: skip
         refits: dict[tuple[int, ...], np.ndarray] = {}
+        refined: dict[tuple[int, ...], tuple[int, ...]] = {}
+        outside = float(rows) - float(b[:, i] @ b[:, i])
         for li, lam in enumerate(lams):
             support = support_at(path, float(lam) ** 2 * rows) if lam > 0 else _last(path)
             if not support:
                 continue
+            if replace:
+                if support not in refined:
+                    refined[support] = replace_terms(a, b[:, i], support, outside,
+                                                     float(n_eff or rows))  # fmt: skip
+                support = refined[support]
             if support not in refits:
                 cols = list(support)
                 refits[support] = np.linalg.lstsq(a[:, cols], b[:, i], rcond=None)[0]
