@@ -393,3 +393,15 @@ def test_bootstrap_drops_a_term_its_bags_spread_across_zero_unless_the_data_need
     assert abs(xi[0, 2]) < 2 * std[0, 2] and abs(xi[0, 3]) < 2 * std[0, 3]
     assert kept[0, 2] == pytest.approx(0.5, rel=1e-2), "the data need u2: kept"
     assert kept[0, 3] == 0 and any("'phi'" in n for n in notes), "phi' does not need phi"
+
+
+def test_six_dof_flight_generator_refuses_a_flight_the_pd_lost():
+    """A vehicle with half the yaw authority, flown at tilt 0.3, tumbles (tilts of 8+ rad,
+    hundreds of metres): such data are refused, not handed to a test or a figure."""
+    from identification.experiments.synthetic import quad6dof_flights
+    from quad_envs.params import Quad6DOFParams
+
+    weak_yaw = Quad6DOFParams(mass=2.0, Jxx=3e-2, Jyy=4e-2, Jzz=6e-2, arm_length=0.3,
+                              rotor_force_max=2.0 * 9.81 / 2)  # fmt: skip
+    with pytest.raises(ValueError, match="the PD lost it"):
+        quad6dof_flights(weak_yaw, FlightSpec(flights=4, tilt=0.3))

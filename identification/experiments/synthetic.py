@@ -206,6 +206,10 @@ def planar_flights(
     return trajs
 
 
+MAX_FLIGHT_TILT = 1.2
+"""A 6-DOF flight tilting past this [rad] has been lost by the small-angle PD: refused."""
+
+
 def quad6dof_flights(
     params: Quad6DOFParams = OTHER_6DOF, spec: FlightSpec = FlightSpec(flights=4)
 ) -> list[Trajectory]:
@@ -217,6 +221,9 @@ def quad6dof_flights(
 
     Returns:
         ``spec.flights`` trajectories of ``spec.steps`` samples (names as the 6-DOF preset).
+
+    Raises:
+        ValueError: A flight tilted past :data:`MAX_FLIGHT_TILT` (the PD lost the vehicle).
     """
     rng = np.random.default_rng(spec.seed)
     rhs = quad6dof_drag_rhs(params, spec.drag)
@@ -242,6 +249,12 @@ def quad6dof_flights(
             )  # fmt: skip
             ctrl = Quad6DOFPD(params)
             states, applied = _fly(rhs, sat, ctrl, ref(t), None, x0, noise, spec)
+        worst = float(np.max(np.abs(states[:, 3:5])))
+        if not worst < MAX_FLIGHT_TILT:
+            raise ValueError(
+                f"flight {len(trajs)} of this vehicle tilted to {worst:.3g} rad: the PD lost it "
+                f"(saturated rotors); lower spec.tilt (now {spec.tilt})"
+            )
         trajs.append(
             Trajectory(t, states, applied, QUAD6DOF_STATE_NAMES, QUAD6DOF_INPUT_NAMES, meta={})
         )
