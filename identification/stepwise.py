@@ -211,29 +211,13 @@ def _swap_twins(
         twins = {pos: st for pos, st in twins.items() if st[0] or st[1]}
         if not twins:
             break
-        # Without chosen column c the span loses the direction v_c = Q R^-T e_c (unit), which
-        # is orthogonal to everything projected off span(Q): closed forms for every swap.
-        q, r = np.linalg.qr(a[:, support])
-        g = np.linalg.inv(r).T  # columns R^-T e_c
-        v = q @ (g / np.linalg.norm(g, axis=0))
         cols = sorted({t for st in twins.values() for t in (*st[0], *st[1])} | set(support))
-        at = a[:, cols]
-        perp = at - q @ (q.T @ at)
-        resid = b - q @ (q.T @ b)
-        perp2 = np.einsum("ij,ij->j", perp, perp)
-        pr = perp.T @ resid
-        va = v.T @ at
-        vb = v.T @ b
+        _, table = _exchange_rss(a, b, support, cols, outside, tol, norms2)
         where = {c: i for i, c in enumerate(cols)}
-        rss_s = outside + float(resid @ resid)
         swap = None
         for pos, (simple, richer) in twins.items():
             idx = [where[t] for t in (support[pos], *simple, *richer)]
-            p2 = perp2[idx] + va[pos, idx] ** 2
-            dot = pr[idx] + va[pos, idx] * vb[pos]
-            valid = p2 > tol * norms2[[support[pos], *simple, *richer]]
-            gains = np.where(valid, dot**2 / np.maximum(p2, 1e-300), -np.inf)
-            rss = rss_s + vb[pos] ** 2 - gains  # RSS with each column in c's place
+            rss = table[pos, idx]  # RSS with each column in c's place (c itself first)
             if not np.isfinite(rss[0]):
                 continue  # c itself lies in the span of the others to round-off: no test
             sigma2 = rss[0] / max(n_rows - len(support), 1.0)
@@ -253,6 +237,40 @@ def _swap_twins(
         support[swap[0]] = swap[1]
         changed = True
     return changed
+
+
+def _exchange_rss(
+    a: np.ndarray,
+    b: np.ndarray,
+    support: list[int],
+    cols: Sequence[int],
+    outside: float,
+    tol: float,
+    norms2: np.ndarray,
+) -> tuple[float, np.ndarray]:
+    """The RSS of ``support``, and the RSS with each of ``cols`` in place of each chosen column.
+
+    Without chosen column c the span loses the direction v_c = Q R^-T e_c (unit), which is
+    orthogonal to everything projected off span(Q): a closed form for every exchange.
+
+    Returns:
+        The RSS, and the table (chosen position, column); inf where the column would lie in
+        the span of the others to round-off (``tol``).
+    """
+    q, r = np.linalg.qr(a[:, support])
+    g = np.linalg.inv(r).T  # columns R^-T e_c
+    v = q @ (g / np.linalg.norm(g, axis=0))
+    at = a[:, cols]
+    perp = at - q @ (q.T @ at)
+    resid = b - q @ (q.T @ b)
+    va = v.T @ at
+    vb = v.T @ b
+    p2 = np.einsum("ij,ij->j", perp, perp)[None, :] + va**2  # its part outside the rest
+    dot = (perp.T @ resid)[None, :] + va * vb[:, None]
+    valid = p2 > tol * norms2[list(cols)][None, :]
+    rss = outside + float(resid @ resid)
+    gains = np.where(valid, dot**2 / np.maximum(p2, 1e-300), -np.inf)
+    return rss, rss + (vb**2)[:, None] - gains
 
 
 def replace_terms(
@@ -290,23 +308,12 @@ def replace_terms(
     norms2 = np.einsum("ij,ij->j", a, a)
     bar = float(chi2.isf(REPLACE_P / (len(support) * (a.shape[1] - len(support))), 1))
     seen = {tuple(sorted(support))}
+    every = list(range(a.shape[1]))
     for _ in range(4 * len(support)):
-        q, r = np.linalg.qr(a[:, support])
-        g = np.linalg.inv(r).T
-        v = q @ (g / np.linalg.norm(g, axis=0))  # the direction each chosen column alone adds
-        perp = a - q @ (q.T @ a)
-        resid = b - q @ (q.T @ b)
-        perp2 = np.einsum("ij,ij->j", perp, perp)
-        pr = perp.T @ resid
-        va = v.T @ a
-        vb = v.T @ b
-        rss = outside + float(resid @ resid)
+        rss, table = _exchange_rss(a, b, support, every, outside, tol, norms2)
+        table[:, support] = np.inf
         sigma2 = rss / max(n_rows - len(support), 1.0)
-        p2 = perp2[None, :] + va**2  # (chosen position, candidate): its part outside the rest
-        dot = pr[None, :] + va * vb[:, None]
-        valid = p2 > tol * norms2[None, :]
-        valid[:, support] = False
-        drop = np.where(valid, dot**2 / np.maximum(p2, 1e-300), -np.inf) - (vb**2)[:, None]
+        drop = rss - table
         pos, col = np.unravel_index(int(np.argmax(drop)), drop.shape)
         if not drop[pos, col] > bar * sigma2:
             break
