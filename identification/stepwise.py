@@ -284,10 +284,11 @@ def replace_terms(
     """Sequential replacement: exchanges chosen columns while the data significantly prefer it.
 
     Each round finds, over every chosen column and every column outside, the exchange that
-    lowers the residual sum of squares most (closed form, as in :func:`_swap_twins`) and makes
-    it when the drop exceeds the chi-square(1) bar at :data:`REPLACE_P` divided by the number
-    of exchanges tried, in residual variances. The support size never changes, so the
-    threshold keeps its meaning; only which columns carry it does.
+    lowers the residual sum of squares most (:func:`_exchange_rss`) and makes it when the drop
+    exceeds the chi-square(1) bar at :data:`REPLACE_P` divided by the number of exchanges
+    tried, in residual variances. Then pairs that can cancel are exchanged together
+    (:func:`_exchange_pairs`). The support size never changes, so the threshold keeps its
+    meaning; only which columns carry it does.
 
     Args:
         a: Scaled regression matrix.
