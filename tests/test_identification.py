@@ -19,6 +19,7 @@ from identification.experiments.truth import (
     model_from_truth,
     planar_truth,
     quad6dof_truth,
+    truth_matrix,
 )
 from identification.features import compile_features, compile_rhs, parse_term, term_name
 from identification.fit import FitConfig, fit
@@ -38,11 +39,12 @@ from quad_envs.dynamics import (
     PLANAR_STATE_NAMES as PS,
 )
 from quad_envs.dynamics import (
-    QUAD6DOF_STATE_NAMES as QS,
-)
-from quad_envs.dynamics import (
+    QUAD6DOF_INPUT_NAMES,
     planar_rhs,
     quad6dof_rhs,
+)
+from quad_envs.dynamics import (
+    QUAD6DOF_STATE_NAMES as QS,
 )
 from quad_envs.params import PAPER_6DOF, PAPER_PLANAR
 from quad_envs.simulate import simulate_case
@@ -97,6 +99,19 @@ def test_truth_in_the_libraries_is_the_physics_and_torch_matches():
                 atol=1e-3 if dtype == torch.float32 else 1e-9,
             )
     assert model_from_truth("planar").n_terms == 7 and model_from_truth("quad6dof").n_terms == 36
+
+
+def test_truth_of_a_symmetric_vehicle_leaves_out_its_zero_terms():
+    # Jxx = Jyy: no gyroscopic p q in r'; a zero "true" term would count as missed
+    symmetric = PAPER_6DOF.replace(Jxx=2e-5, Jyy=2e-5, Jzz=3e-5)
+    truth = quad6dof_truth(symmetric)
+    assert "p q" not in truth["r"] and sum(len(t) for t in truth.values()) == 35
+    assert all(c != 0 for terms in truth.values() for c in terms.values())
+    x, u = np.random.default_rng(2).normal(size=(32, 12)) * 0.4, np.ones((32, 4))
+    names = sorted({f for terms in truth.values() for f in terms})
+    xi = truth_matrix(truth, QS, names)
+    model = IdentifiedModel(names, xi, QS, QUAD6DOF_INPUT_NAMES)
+    np.testing.assert_allclose(model.rhs(x, u), quad6dof_rhs(x, u, symmetric), atol=1e-9)
 
 
 # -- data -------------------------------------------------------------------------------

@@ -28,10 +28,14 @@ def planar_truth(params: PlanarQuadParams = PAPER_PLANAR) -> dict[str, dict[str,
 
 
 def quad6dof_truth(params: Quad6DOFParams = PAPER_6DOF) -> dict[str, dict[str, float]]:
-    """True 6-DOF model (paper section 2) as {state: {feature: coefficient}} (36 terms)."""
+    """True 6-DOF model (paper section 2) as {state: {feature: coefficient}}.
+
+    36 terms; fewer for a symmetric vehicle, whose zero gyroscopic terms (``p q`` in ``r'``
+    when Jxx = Jyy) are left out.
+    """
     g, m = params.gravity, params.mass
     jx, jy, jz = params.Jxx, params.Jyy, params.Jzz
-    return {
+    truth = {
         "x": {
             "cos(psi) cos(theta) u": 1, "sin(phi) sin(psi) sin(theta) u": -1,
             "cos(phi) sin(psi) v": -1, "cos(psi) sin(theta) w": 1,
@@ -53,6 +57,7 @@ def quad6dof_truth(params: Quad6DOFParams = PAPER_6DOF) -> dict[str, dict[str, f
         "q": {"u3": 1 / jy, "p r": -(jx - jz) / jy},
         "r": {"u4": 1 / jz, "p q": -(jy - jx) / jz},
     }  # fmt: skip
+    return {state: {f: c for f, c in terms.items() if c != 0} for state, terms in truth.items()}
 
 
 def truth_for(system: str) -> dict[str, dict[str, float]]:
