@@ -104,6 +104,11 @@ class FitConfig:
         full_path: ``stepwise`` only: run each path to its longest support instead of
             ending it after a few entries in a row that fail the F-test (noise). The pilot
             that places the RK4 stage points of the selection uses the full path.
+        backward: ``stepwise`` only: where backward elimination from the columns the path
+            entered gives a significantly better support than the forward path
+            (:func:`identification.stepwise.backward_path`), take it. On for a fit; the
+            candidates of the automatic selection are scored without it, and the chosen
+            one is refitted with it.
     """
 
     derivative: str | BaseDifferentiation = "rk4"
@@ -116,6 +121,7 @@ class FitConfig:
     seed: int = 0
     set_lam: bool = False
     full_path: bool = False
+    backward: bool = True
 
     def __post_init__(self) -> None:
         if isinstance(self.derivative, str) and self.derivative not in DERIVATIVES:
@@ -495,7 +501,8 @@ def solve_lambdas(
     # the pilot (full path) only places stage points: no replacement search there
     coef_s = stepwise_coefficients(a, b, rows, lams, simpler=twins, n_eff=rows,
                                    stop_noise=not config.full_path,
-                                   replace=not config.full_path)  # fmt: skip
+                                   replace=not config.full_path,
+                                   backward=config.backward and not config.full_path)  # fmt: skip
     for li, lam in enumerate(lams):
         if lam == 0:
             coef_s[li] = np.linalg.lstsq(a, b, rcond=None)[0].T

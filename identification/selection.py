@@ -527,12 +527,14 @@ def select_model(
         pilots[w] = pilot
         unit_grams = grams(units, names, base.derivative if base.derivative != "rk4" else "rk4",
                            w, pilot)  # fmt: skip
+        # candidates are the forward paths; the chosen one is refitted with the backward check
+        grid_cfg = dataclasses.replace(base, window=w, backward=False)
         scores = np.full((len(lambdas), k), np.inf)
         for f in range(k):
             train = Gram.stack([g for g, fo in zip(unit_grams, fold_of, strict=True) if fo != f])
             held = [u for u, fo in zip(units, fold_of, strict=True) if fo == f]
             try:
-                fold_xis = solve_lambdas(train, dataclasses.replace(base, window=w), lambdas, names)
+                fold_xis = solve_lambdas(train, grid_cfg, lambdas, names)
             except (np.linalg.LinAlgError, ValueError, FloatingPointError):
                 steps.update()
                 continue
@@ -544,7 +546,7 @@ def select_model(
                     scores[li, f] = np.inf
             steps.update()
         full = Gram.stack(unit_grams)
-        full_xis = solve_lambdas(full, dataclasses.replace(base, window=w), lambdas, names)
+        full_xis = solve_lambdas(full, grid_cfg, lambdas, names)
         for li, (lam, xi) in enumerate(zip(lambdas, full_xis, strict=True)):
             candidates.append(Candidate(w, float(lam), int(np.count_nonzero(xi)),
                                         list(scores[li])))  # fmt: skip
@@ -560,7 +562,8 @@ def select_model(
         f"{k}-fold cross-validation over {'trajectories' if len(trajs) >= 3 else 'blocks'}; "
         f"score = RMS of the {horizon}-step open-loop prediction error normalised by each "
         "state's standard deviation; chosen: the fewest terms within one standard error of "
-        f"the best mean score plus the scores' own integrator error ({resolution:.2g})"
+        f"the best mean score plus the scores' own integrator error ({resolution:.2g}); "
+        "refitted on all data with the backward-elimination check"
     )
     report = SelectionReport(candidates, chosen, k, horizon, rule)
 

@@ -51,6 +51,10 @@ INSIGNIFICANT_STEPS = 8
 REPLACE_P = 1e-3
 """Significance of one replacement, before the Bonferroni correction for the exchanges tried."""
 
+BACKWARD_REACH = 0.1
+"""With replacement on, each path runs to this fraction of the smallest threshold: the columns
+entered there are where backward elimination starts (see :func:`backward_path`)."""
+
 BACKWARD_FRACTION = 0.5
 """A chosen column is removed when that costs less than this fraction of the last gain (FoBa)."""
 
@@ -428,6 +432,7 @@ def stepwise_coefficients(
     n_eff: float | None = None,
     stop_noise: bool = True,
     replace: bool = True,
+    backward: bool = True,
 ) -> np.ndarray:
     """Scaled coefficients of every target at every threshold (one path per target).
 
@@ -442,6 +447,8 @@ def stepwise_coefficients(
         stop_noise: End each path after a few insignificant entries (see
             :func:`stepwise_path`).
         replace: Refine each support read off the path by :func:`replace_terms`.
+        backward: Take the backward-elimination support (:func:`backward_path`) where it is
+            significantly better.
 
     Returns:
         Shape (len(lams), targets, p), least-squares refits on each support.
@@ -451,12 +458,18 @@ def stepwise_coefficients(
     out = np.zeros((len(lams), b.shape[1], p))
     positive = [float(v) for v in lams if v > 0]
     floor = min(positive) ** 2 * rows if positive and len(positive) == len(lams) else 0.0
+    if backward:
+        # the path goes a decade further, so that backward elimination (`backward_path`)
+        # starts from the columns the data support just below the threshold too
+        floor *= BACKWARD_REACH**2
     for i in range(b.shape[1]):
         path = stepwise_path(a, b[:, i], max_terms, simpler=simpler, total=float(rows),
                              n_eff=n_eff or rows, floor=floor, stop_noise=stop_noise)  # fmt: skip
         refits: dict[tuple[int, ...], np.ndarray] = {}
         refined: dict[tuple[int, ...], tuple[int, ...]] = {}
         outside = float(rows) - float(b[:, i] @ b[:, i])
+        entered = sorted({c for step, _ in path for c in step})
+        back = backward_path(a, b[:, i], entered) if backward else []
         for li, lam in enumerate(lams):
             support = support_at(path, float(lam) ** 2 * rows) if lam > 0 else _last(path)
             if not support:
@@ -466,11 +479,96 @@ def stepwise_coefficients(
                     refined[support] = replace_terms(a, b[:, i], support, outside,
                                                      float(n_eff or rows))  # fmt: skip
                 support = refined[support]
+            if lam > 0 and back:
+                support = _better_support(a, b[:, i], support, back, float(lam) ** 2 * rows,
+                                          simpler, outside, float(n_eff or rows))  # fmt: skip
             if support not in refits:
                 cols = list(support)
                 refits[support] = np.linalg.lstsq(a[:, cols], b[:, i], rcond=None)[0]
             out[li, i, list(support)] = refits[support]
     return out
+
+
+def backward_path(
+    a: np.ndarray, b: np.ndarray, columns: Sequence[int]
+) -> list[tuple[tuple[int, ...], float]]:
+    """Backward elimination from ``columns``: the path from all of them down to one.
+
+    Each step removes the column whose removal raises the residual sum of squares least
+    (``coef^2 / (R^-1 R^-T)_kk``). Greedy entry can go astray when the best single column is
+    a blend of true ones (``cos(phi) q`` in ``theta'`` at large tilt): the columns entered
+    later then compensate, and the forward support never becomes the true one, though every
+    true column entered somewhere on the path. Eliminating from all the columns the forward
+    path entered starts from a support that holds them all.
+
+    Returns:
+        One entry per removal, largest support first: the support before the removal and the
+        removal's cost (increase of the residual sum of squares).
+    """
+    support = list(columns)
+    path: list[tuple[tuple[int, ...], float]] = []
+    while support:
+        q, r = np.linalg.qr(a[:, support])
+        diag = np.abs(np.diag(r))
+        if diag.min() <= COLLINEAR_TOL * max(diag.max(), 1e-300):
+            # a column in the span of the others (to round-off): it costs nothing to remove
+            k = int(np.argmin(diag))
+            path.append((tuple(sorted(support)), 0.0))
+            support.pop(k)
+            continue
+        r_inv = np.linalg.inv(r)
+        coef = r_inv @ (q.T @ b)
+        loss = coef**2 / np.maximum(np.einsum("ij,ij->i", r_inv, r_inv), 1e-300)
+        k = int(np.argmin(loss))
+        path.append((tuple(sorted(support)), float(loss[k])))
+        support.pop(k)
+    return path
+
+
+def _better_support(
+    a: np.ndarray,
+    b: np.ndarray,
+    support: tuple[int, ...],
+    back: Sequence[tuple[tuple[int, ...], float]],
+    floor: float,
+    simpler: dict[int, list[int]] | None,
+    outside: float,
+    n_rows: float,
+) -> tuple[int, ...]:
+    """The forward support, or the backward one where it is significantly better.
+
+    Both searches aim at the same objective, ``RSS + floor |S|`` (a gain threshold of
+    ``floor`` is the greedy solution of that L0 penalty). The backward support at ``floor``
+    (the last before a removal costing ``floor`` or more; complex columns given way to simpler
+    twins as on the forward path) replaces the forward one only when its objective is lower
+    by more than the replacement bar (chi-square(1) at :data:`REPLACE_P` over the number of
+    exchanges of one column, in residual variances): near ties keep the forward path's
+    choices.
+    """
+    from scipy.stats import chi2
+
+    candidate: tuple[int, ...] = ()
+    for step, loss in back:
+        if loss >= floor:
+            candidate = step
+            break
+    if not candidate or candidate == support:
+        return support
+    chosen = list(candidate)
+    if simpler:
+        _swap_twins(a, b, chosen, simpler, _invert(simpler), outside, n_rows)
+    forward_rss = _support_rss(a, b, list(support), outside)
+    backward_rss = _support_rss(a, b, chosen, outside)
+    sigma2 = min(forward_rss, backward_rss) / max(n_rows - max(len(support), len(chosen)), 1.0)
+    gain = forward_rss + floor * len(support) - (backward_rss + floor * len(chosen))
+    k = max(len(support), len(chosen))
+    bar = float(chi2.isf(REPLACE_P / max(k * (a.shape[1] - k), 1), 1))
+    return tuple(sorted(chosen)) if gain > bar * sigma2 else support
+
+
+def _support_rss(a: np.ndarray, b: np.ndarray, cols: list[int], outside: float) -> float:
+    q = np.linalg.qr(a[:, cols])[0]
+    return outside + float(b @ b) - float(np.sum((q.T @ b) ** 2))
 
 
 def _last(path: Sequence[tuple[tuple[int, ...], float]]) -> tuple[int, ...]:
