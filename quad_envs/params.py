@@ -32,11 +32,51 @@ that many motors' limits) at the roll moment arm.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 _G = 9.81
+
+_POSITIVE = ("mass", "Ixx", "Jxx", "Jyy", "Jzz", "arm_length")
+_NONNEGATIVE = (
+    "gravity",
+    "rotor_force_min",
+    "rotor_time_constant",
+    "thrust_coefficient",
+    "drag_linear_xy",
+    "drag_linear_z",
+    "drag_quadratic_xy",
+    "drag_quadratic_z",
+)
+
+
+def _check_physical(params: object) -> None:
+    """Raises ValueError naming the first field a physical vehicle cannot have.
+
+    Masses, inertias and arms are positive, the rotor limits ordered and non-negative, time
+    constants, thrust and drag coefficients non-negative, every number finite (a zero or
+    negative mass would fly a vehicle that cannot exist: inf accelerations, or one that falls
+    up).
+    """
+    for field in dataclasses.fields(params):  # type: ignore[arg-type]
+        value = getattr(params, field.name)
+        if isinstance(value, str):
+            continue
+        value = np.asarray(value, dtype=float)  # arrays: a batch of vehicles
+        if not np.isfinite(value).all():
+            raise ValueError(f"vehicle parameter {field.name} must be finite, got {value}")
+        if field.name in _POSITIVE and not (value > 0).all():
+            raise ValueError(f"vehicle parameter {field.name} must be positive, got {value}")
+        if field.name in _NONNEGATIVE and not (value >= 0).all():
+            raise ValueError(f"vehicle parameter {field.name} must be >= 0, got {value}")
+    low, high = params.rotor_force_min, params.rotor_force_max  # type: ignore[attr-defined]
+    if not (np.asarray(high) > np.asarray(low)).all():
+        raise ValueError(
+            f"vehicle parameter rotor_force_max ({high}) must exceed rotor_force_min ({low})"
+        )
 
 
 @dataclass(frozen=True)
@@ -76,6 +116,13 @@ class PlanarQuadParams:
     drag_linear_z: float = 0.01
     drag_quadratic_xy: float = 0.005
     drag_quadratic_z: float = 0.01
+
+    def __post_init__(self) -> None:
+        _check_physical(self)
+        if not (np.asarray(self.motors_per_rotor) >= 1).all():
+            raise ValueError(
+                f"vehicle parameter motors_per_rotor must be >= 1, got {self.motors_per_rotor}"
+            )
 
     @property
     def hover_thrust(self) -> float:
@@ -164,6 +211,7 @@ class Quad6DOFParams:
     def __post_init__(self) -> None:
         if self.frame not in ("+", "x"):
             raise ValueError(f"frame must be '+' or 'x', got {self.frame!r}")
+        _check_physical(self)
 
     @property
     def inertia(self) -> np.ndarray:
@@ -325,3 +373,28 @@ def get_preset(name: str, kind: str) -> PlanarQuadParams | Quad6DOFParams:
     if name not in PRESETS:
         raise ValueError(f"unknown vehicle preset {name!r}; valid choices: {', '.join(PRESETS)}")
     return PRESETS[name][kind]
+
+
+def with_changes(params: Any, changes: Mapping[str, str]) -> Any:
+    """``params`` with some fields set from text (``mass=0.5`` on the command line).
+
+    Each value is converted to its field's type; an unknown field, a value that is not of that
+    type and a vehicle that cannot exist (:func:`_check_physical`) raise ValueError naming it.
+    """
+    fields = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)}
+    typed: dict[str, object] = {}
+    for name, text in changes.items():
+        if name not in fields:
+            raise ValueError(
+                f"unknown vehicle parameter {name!r}; valid names: {', '.join(fields)}"
+            )
+        kind = type(fields[name])
+        if kind not in (float, int, str):
+            raise ValueError(f"vehicle parameter {name!r} cannot be set from text")
+        try:
+            typed[name] = kind(text) if kind is not int else int(str(text), 10)
+        except ValueError:
+            raise ValueError(
+                f"vehicle parameter {name} must be a {kind.__name__}, got {text!r}"
+            ) from None
+    return dataclasses.replace(params, **typed)

@@ -102,7 +102,18 @@ def simulate_closed_loop(
 def simulate_case(
     case: str, vehicle: str | Vehicle = "planar", dt: float = 0.01, duration: float = 10.0
 ) -> ClosedLoopRun:
-    """Simulates one of the paper's cases (``A``, ``B``, ``C``) or any named trajectory."""
+    """Simulates one of the paper's cases (``A``, ``B``, ``C``) or any named trajectory.
+
+    Raises:
+        ValueError: The vehicle cannot hover (its rotors' largest thrust does not exceed its
+            weight): no controller can fly the reference, and the run would be a fall.
+    """
     veh = get_vehicle(vehicle) if isinstance(vehicle, str) else vehicle
+    params = veh.params
+    if hasattr(params, "thrust_max") and not params.thrust_max > params.hover_thrust:
+        raise ValueError(
+            f"the vehicle cannot hover: its largest thrust {params.thrust_max:.4g} N does not "
+            f"exceed its weight m g = {params.hover_thrust:.4g} N (raise rotor_force_max)"
+        )
     traj = make_trajectory(case, ndim=veh.ndim, rng=np.random.default_rng(0))
     return simulate_closed_loop(veh, traj, dt=dt, duration=duration)

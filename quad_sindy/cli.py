@@ -75,18 +75,42 @@ def simulate(
     system: Annotated[SystemName, typer.Option(help="vehicle model")] = SystemName.planar,
     dt: Annotated[float, typer.Option(help="control and sample period [s]")] = 0.01,
     duration: Annotated[float, typer.Option(help="final time [s]")] = 10.0,
+    vehicle: Annotated[
+        str | None, typer.Option(help="parameter preset: paper, crazyflie or pelican")
+    ] = None,
+    param: Annotated[
+        list[str] | None,
+        typer.Option(help="NAME=VALUE: set one vehicle parameter (repeat; e.g. mass=0.5)"),
+    ] = None,
 ) -> None:
     """Flies a reference under the vehicle's controller; writes t, states, inputs, references.
 
     The input columns (``u1, u2``) hold the inputs the rotors applied (after saturation);
-    the controller's commands follow as ``u1_cmd, u2_cmd``.
+    the controller's commands follow as ``u1_cmd, u2_cmd``. ``--vehicle`` and ``--param``
+    fly another vehicle (the controller's gains scale to it), for example
+    ``--param mass=0.5 --param Ixx=3e-3 --param rotor_force_max=4.9``.
     """
     from quad_envs.fileio import write_csv
+    from quad_envs.params import get_preset, with_changes
     from quad_envs.simulate import simulate_case
+    from quad_envs.vehicles import get_vehicle
 
     _writable_file(out)
     try:
-        run = simulate_case(case, system.value, dt=dt, duration=duration)
+        veh = get_vehicle(system.value)
+        if vehicle is not None:
+            if system.value not in ("planar", "quad6dof"):
+                _fail(f"--vehicle presets are for planar and quad6dof, not {system.value}")
+            veh = veh.with_params(get_preset(vehicle, system.value))
+        changes = {}
+        for item in param or []:
+            name, sep, value = item.partition("=")
+            if not sep or not name.strip() or not value.strip():
+                _fail(f"--param takes NAME=VALUE, got {item!r}")
+            changes[name.strip()] = value.strip()
+        if changes:
+            veh = veh.with_params(with_changes(veh.params, changes))
+        run = simulate_case(case, veh, dt=dt, duration=duration)
     except ValueError as exc:
         _fail(str(exc))
     header, rows = run.table()

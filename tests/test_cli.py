@@ -48,6 +48,11 @@ def ppo_zip(tmp_path_factory):
         (["simulate", "--out", "{tmp}"], ["is a directory"]),
         (["simulate", "--out", "{file}/x.csv"], ["is a file, not a folder"]),
         (["simulate", "--out", "{tmp}/c.csv", "--case", "nope"], ["unknown trajectory"]),
+        (["simulate", "--out", "{tmp}/c.csv", "--param", "mass"], ["NAME=VALUE"]),
+        (["simulate", "--out", "{tmp}/c.csv", "--param", "Jxx=1"], ["unknown vehicle parameter"]),
+        (["simulate", "--out", "{tmp}/c.csv", "--param", "mass=-1"], ["mass must be positive"]),
+        (["simulate", "--out", "{tmp}/c.csv", "--param", "mass=0.5"], ["cannot hover"]),
+        (["simulate", "--out", "{tmp}/c.csv", "--vehicle", "nope"], ["unknown vehicle preset"]),
         (["reproduce", "--authors-csv", "/nonexistent.csv", "--out", "{tmp}/r"], ["no such"]),
         (["train", "--out", "{tmp}/t", "--eval-every", "0"], ["must be positive"]),
         (["train", "--out", "{tmp}/t", "--steps", "-5"], ["must be positive"]),
@@ -116,3 +121,25 @@ def test_identify_picks_the_preset_of_a_vehicle_whose_variables_the_data_name(
     assert "the planar vehicle's preset" in out
     model = load_model(tmp_path / "m.json")
     assert "sin(phi) u1" in model.feature_names and model.n_terms == 7
+
+
+def test_simulate_flies_another_vehicle_that_identify_then_recovers(monkeypatch, capsys, tmp_path):
+    """``simulate --param`` flies a vehicle of the user's (here m = 0.7 kg, Ixx = 5e-3): the
+    identified inputs' gains are its own 1/m and 1/Ixx, not the paper vehicle's (5.6, 4000)."""
+    from identification.model import load_model
+
+    data, model_path = tmp_path / "f.csv", tmp_path / "m.json"
+    changes = ["mass=0.7", "Ixx=5e-3", "arm_length=0.12", "rotor_force_max=6.9"]
+    code, _, err = run_cli(monkeypatch, capsys, "simulate", "--out", str(data),
+                           *[a for c in changes for a in ("--param", c)])  # fmt: skip
+    assert code in (0, None), err
+    code, _, err = run_cli(monkeypatch, capsys, "identify", str(data), "--out", str(model_path))
+    assert code in (0, None), err
+    model = load_model(model_path)
+    coef = dict(zip(model.feature_names, model.coefficients[model.state_names.index("z_dot")],
+                    strict=True))  # fmt: skip
+    assert coef["cos(phi) u1"] == pytest.approx(1 / 0.7, rel=1e-6)
+    assert coef["1"] == pytest.approx(-9.81, rel=1e-6)
+    phi_dd = model.coefficients[model.state_names.index("phi_dot")]
+    assert phi_dd[model.feature_names.index("u2")] == pytest.approx(1 / 5e-3, rel=1e-6)
+    assert model.n_terms == 7

@@ -285,3 +285,22 @@ def test_kernels_are_built_from_the_vehicle_record_into_the_cache(tmp_path, monk
     assert stat.S_IMODE(os.stat(path).st_mode) == 0o666 & ~umask
     text = open(path).read()
     assert "planar_point as _field" in text and "planar_observe_point as _observe" in text
+
+
+@pytest.mark.parametrize("env_id,field", [("PlanarQuad-v0", "Ixx"), ("Quad6DOF-v0", "Jyy")])
+def test_a_vehicle_that_cannot_exist_is_refused_by_name(env_id, field):
+    """Zero or negative masses and inertias, NaN, and rotor limits out of order raise a
+    ValueError naming the field (a negative inertia would fly a roll that runs away)."""
+    from quad_envs.params import PAPER_6DOF, PAPER_PLANAR
+
+    base = PAPER_PLANAR if env_id == "PlanarQuad-v0" else PAPER_6DOF
+    for bad in ({"mass": 0.0}, {field: -1e-3}, {"arm_length": float("nan")},
+                {"rotor_force_max": base.rotor_force_min}):  # fmt: skip
+        name = next(iter(bad))
+        with pytest.raises(ValueError, match=name):
+            gym.make(env_id, params=base.replace(**bad))
+    # a batch of vehicles (arrays, as domain randomisation builds them) is checked per member
+    ok = base.replace(mass=np.array([0.1, 0.2]))
+    assert ok.mass.shape == (2,)
+    with pytest.raises(ValueError, match="mass"):
+        base.replace(mass=np.array([0.1, -0.2]))
