@@ -393,7 +393,22 @@ def _read_table(
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such data file: {path}")
-    text = path.read_text()
+    if path.suffix.lower() in PARQUET_SUFFIXES:
+        names, data = _read_parquet(path)
+        if columns is not None:
+            if len(columns) != len(names):
+                raise ValueError(f"{path} has {len(names)} numeric columns but {len(columns)} "
+                                 "names were given")  # fmt: skip
+            names = list(columns)
+        st, inp = resolve_names(names, system, states, inputs, time)
+        return names, data, st, inp
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError:
+        raise ValueError(
+            f"{path} is not a text CSV file (data files are CSV with a header, "
+            f"{' / '.join(PARQUET_SUFFIXES)} or .npz)"
+        ) from None
     first = text.splitlines()[0] if text.strip() else ""
     has_header = any(ch.isalpha() for ch in first.replace("e-", "").replace("e+", ""))
     if columns is None:
@@ -412,6 +427,40 @@ def _read_table(
     return list(columns), data, st, inp
 
 
+PARQUET_SUFFIXES = (".parquet", ".pq")
+"""File endings read as Apache Parquet tables (flight logs)."""
+
+
+def _read_parquet(path: Path) -> tuple[list[str], np.ndarray]:
+    """The numeric columns of a parquet file (names, rows x columns float64).
+
+    Integer and floating columns are read; timestamps become seconds; other columns (text
+    labels) cannot be states or inputs and are left out.
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path)
+    except (OSError, pa.ArrowException) as exc:
+        raise ValueError(f"{path}: cannot read the parquet file ({exc})") from None
+    names, cols = [], []
+    for name, column in zip(table.column_names, table.columns, strict=True):
+        kind = column.type
+        if pa.types.is_timestamp(kind):
+            seconds = column.cast(pa.timestamp("ns")).cast(pa.int64())
+            values = seconds.to_numpy(zero_copy_only=False).astype(np.float64) * 1e-9
+        elif pa.types.is_integer(kind) or pa.types.is_floating(kind):
+            values = column.to_numpy(zero_copy_only=False).astype(np.float64)
+        else:
+            continue
+        names.append(name)
+        cols.append(values)
+    if not cols or table.num_rows == 0:
+        raise ValueError(f"{path} has no rows of numeric columns")
+    return names, np.column_stack(cols)
+
+
 def read_log(
     path: str | Path,
     columns: Sequence[str] | None = None,
@@ -420,10 +469,11 @@ def read_log(
     inputs: Sequence[str] | None = None,
     time: str = "t",
 ) -> tuple[list[Trajectory], CleanReport]:
-    """Reads a raw CSV log and :func:`clean` s it: segments plus a report of what was dropped.
+    """Reads a raw CSV or parquet log and :func:`clean` s it: segments and what was dropped.
 
     Args:
-        path: CSV file (arguments as :func:`read_csv`).
+        path: CSV or parquet file (arguments as :func:`read_csv`; a parquet file's numeric
+            columns are its header).
         columns: Column names in order, for headerless files.
         system: Preset whose names pick states and inputs (None: from the names alone).
         states: Explicit state columns.
@@ -487,7 +537,7 @@ def load_data(
     states: Sequence[str] | None = None,
     inputs: Sequence[str] | None = None,
 ) -> tuple[list[Trajectory], CleanReport]:
-    """Reads CSV logs (cleaned, see :func:`read_log`) and NPZ archives into clean segments.
+    """Reads CSV and parquet logs (cleaned: :func:`read_log`) and NPZ archives as segments.
 
     Returns:
         The segments and the merged cleaning report.

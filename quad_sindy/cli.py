@@ -175,7 +175,7 @@ def _matching_vehicle(state_names: tuple[str, ...], input_names: tuple[str, ...]
 
 @app.command()
 def identify(
-    data: Annotated[list[Path], typer.Argument(help="CSV or NPZ trajectory files")],
+    data: Annotated[list[Path], typer.Argument(help="CSV, parquet or NPZ trajectory files")],
     out: Annotated[Path, typer.Option(help="model JSON to write")],
     system: Annotated[
         SystemName | None, typer.Option(help="preset vehicle: its variable names and library")
