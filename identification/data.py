@@ -312,7 +312,9 @@ def resolve_names(
     """
     cols = list(columns)
     if time not in cols:
-        raise ValueError(f"columns must include the time column {time!r}, got {cols}")
+        raise ValueError(
+            f"no time column {time!r} (name it with time= / --time) among the columns {cols}"
+        )
     if len(set(cols) - {"_"}) != len([c for c in cols if c != "_"]):
         raise ValueError(f"duplicate column names in {cols}")
     if system is not None and system not in PRESET_VARIABLES:
@@ -536,8 +538,11 @@ def load_data(
     system: str | None = "planar",
     states: Sequence[str] | None = None,
     inputs: Sequence[str] | None = None,
+    time: str = "t",
 ) -> tuple[list[Trajectory], CleanReport]:
     """Reads CSV and parquet logs (cleaned: :func:`read_log`) and NPZ archives as segments.
+
+    Arguments as :func:`read_log` (``time``: the logs' time column, in seconds).
 
     Returns:
         The segments and the merged cleaning report.
@@ -551,7 +556,7 @@ def load_data(
                 trajs.extend(segs)
                 report = report.merge(rep)
         else:
-            segs, rep = read_log(path, columns, system, states, inputs)
+            segs, rep = read_log(path, columns, system, states, inputs, time)
             trajs.extend(segs)
             report = report.merge(rep)
     names = {(tr.state_names, tr.input_names) for tr in trajs}

@@ -181,6 +181,7 @@ def identify(
         SystemName | None, typer.Option(help="preset vehicle: its variable names and library")
     ] = None,
     columns: Annotated[str | None, typer.Option(help="names of a headerless CSV's columns")] = None,
+    time: Annotated[str, typer.Option(help="time column [s]")] = "t",
     states: Annotated[str | None, typer.Option(help="state columns, comma-separated")] = None,
     inputs: Annotated[str | None, typer.Option(help="input columns, comma-separated")] = None,
     angles: Annotated[str | None, typer.Option(help="angle states (Fourier terms)")] = None,
@@ -220,7 +221,9 @@ def identify(
             and library in ("planar", "quad6dof")
         ):
             preset = library
-        trajs, cleaning = load_data(data, split(columns), preset, split(states), split(inputs))
+        trajs, cleaning = load_data(
+            data, split(columns), preset, split(states), split(inputs), time.strip()
+        )
         if cleaning.rows_out != cleaning.rows_in or cleaning.jitter > 1e-6:
             typer.echo(f"data: {cleaning.summary()}")
         first = trajs[0]

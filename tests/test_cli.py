@@ -179,3 +179,28 @@ def test_identify_reads_a_parquet_log_as_its_csv(monkeypatch, capsys, tmp_path):
     assert from_parquet.feature_names == from_csv.feature_names
     np.testing.assert_allclose(from_parquet.coefficients, from_csv.coefficients, rtol=1e-6,
                                atol=1e-9)  # fmt: skip
+
+
+def test_identify_takes_the_time_column_a_log_names(monkeypatch, capsys, tmp_path):
+    """A log whose time column is ``time``: refused in one line that names ``--time``, and
+    with ``--time time`` the same model as with ``t`` (time is not taken for a state)."""
+    from identification.data import write_trajectory_csv
+    from identification.experiments.synthetic import planar_flights
+    from identification.model import load_model
+
+    path = write_trajectory_csv(tmp_path / "f.csv", planar_flights()[0])
+    text = path.read_text()
+    renamed = tmp_path / "g.csv"
+    renamed.write_text("time" + text[1:])
+    code, _, err = run_cli(monkeypatch, capsys, "identify", str(renamed), "--out",
+                           str(tmp_path / "x.json"))  # fmt: skip
+    assert_one_line_error(code, err, "no time column 't'", "--time")
+    models = []
+    for data, extra in ((path, []), (renamed, ["--time", "time"])):
+        out = tmp_path / f"{data.stem}.json"
+        code, _, err = run_cli(monkeypatch, capsys, "identify", str(data), "--out", str(out),
+                               "--lambda", "1e-3", *extra)  # fmt: skip
+        assert code in (0, None), err
+        models.append(load_model(out))
+    assert "time" not in models[1].state_names
+    np.testing.assert_array_equal(models[0].coefficients, models[1].coefficients)
