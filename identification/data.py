@@ -1,4 +1,4 @@
-"""Trajectories of (t, states, inputs): validation, real-log cleaning, CSV/NPZ I/O.
+"""Trajectories of (t, states, inputs): validation, real-log cleaning, CSV/parquet/NPZ I/O.
 
 ``u[k]`` is the input *applied* (held) over [t_k, t_k+1). Time stamps must increase but need
 not be uniform: the RK4 formulation of :mod:`identification.fit` uses each row's own step.
@@ -396,7 +396,11 @@ def _read_table(
     if not path.exists():
         raise FileNotFoundError(f"no such data file: {path}")
     if path.suffix.lower() in PARQUET_SUFFIXES:
-        names, data = _read_parquet(path)
+        table = read_table(path)
+        names = list(table)
+        if not names or not len(table[names[0]]):
+            raise ValueError(f"{path} has no rows of numeric columns")
+        data = np.column_stack(list(table.values()))
         if columns is not None:
             if len(columns) != len(names):
                 raise ValueError(f"{path} has {len(names)} numeric columns but {len(columns)} "
@@ -429,38 +433,65 @@ def _read_table(
     return list(columns), data, st, inp
 
 
+# -- tables -----------------------------------------------------------------------------
 PARQUET_SUFFIXES = (".parquet", ".pq")
 """File endings read as Apache Parquet tables (flight logs)."""
 
 
-def _read_parquet(path: Path) -> tuple[list[str], np.ndarray]:
-    """The numeric columns of a parquet file (names, rows x columns float64).
+def read_table(path: str | Path, columns: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """Reads a parquet or CSV file into float64 columns (timestamps as seconds).
 
-    Integer and floating columns are read; timestamps become seconds; other columns (text
-    labels) cannot be states or inputs and are left out.
+    With ``columns`` None, columns that are not numeric (text labels) are left out.
+
+    Args:
+        path: ``.parquet`` / ``.pq`` or ``.csv`` file.
+        columns: Only these columns (all when None); a missing one raises ValueError.
+
+    Returns:
+        Column name -> 1-D float array.
     """
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no such log file: {path}")
+    suffix = path.suffix.lower()
     try:
-        table = pq.read_table(path)
-    except (OSError, pa.ArrowException) as exc:
-        raise ValueError(f"{path}: cannot read the parquet file ({exc})") from None
-    names, cols = [], []
-    for name, column in zip(table.column_names, table.columns, strict=True):
-        kind = column.type
-        if pa.types.is_timestamp(kind):
-            seconds = column.cast(pa.timestamp("ns")).cast(pa.int64())
-            values = seconds.to_numpy(zero_copy_only=False).astype(np.float64) * 1e-9
-        elif pa.types.is_integer(kind) or pa.types.is_floating(kind):
-            values = column.to_numpy(zero_copy_only=False).astype(np.float64)
+        if suffix in PARQUET_SUFFIXES:
+            import pyarrow.parquet as pq
+
+            names = pq.read_schema(path).names
+            _check_columns(path, names, columns)
+            table = pq.read_table(path, columns=list(columns) if columns else None)
+        elif suffix == ".csv":
+            import pyarrow.csv as pcsv
+
+            table = pcsv.read_csv(path)
+            _check_columns(path, table.column_names, columns)
+            if columns:
+                table = table.select(list(columns))
         else:
-            continue
-        names.append(name)
-        cols.append(values)
-    if not cols or table.num_rows == 0:
-        raise ValueError(f"{path} has no rows of numeric columns")
-    return names, np.column_stack(cols)
+            raise ValueError(f"{path}: unsupported log format {suffix!r} (use .parquet or .csv)")
+    except (OSError, pa.ArrowInvalid) as exc:  # unreadable, or not that format inside
+        raise ValueError(f"{path}: cannot read the log ({exc})") from None
+    out: dict[str, np.ndarray] = {}
+    for name in table.column_names:
+        column = table.column(name)
+        scale = 1.0
+        if pa.types.is_timestamp(column.type):  # to seconds
+            column, scale = column.cast(pa.timestamp("ns")).cast(pa.int64()), 1e-9
+        try:
+            out[name] = column.to_numpy(zero_copy_only=False).astype(np.float64) * scale
+        except (TypeError, ValueError):
+            if columns:
+                raise ValueError(f"{path}: column {name!r} is not numeric") from None
+    return out
+
+
+def _check_columns(path: Path, names: Sequence[str], wanted: Sequence[str] | None) -> None:
+    missing = [c for c in (wanted or []) if c not in names]
+    if missing:
+        raise ValueError(f"{path}: missing column(s) {missing}")
 
 
 def read_log(

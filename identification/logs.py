@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.data import Trajectory
+from identification.data import Trajectory, read_table
 from quad_envs.dynamics import QUAD6DOF_STATE_NAMES, rotation_zxy
 
 MOTOR_UNITS = ("rad/s", "rpm", "erpm")
@@ -179,55 +179,6 @@ class CleaningReport:
             f"|q| {self.quaternion_norm_range[0]:.3f}..{self.quaternion_norm_range[1]:.3f} "
             f"-> residual {self.quaternion_norm_error:.1e}"
         )
-
-
-# -- tables -----------------------------------------------------------------------------
-def read_table(path: str | Path, columns: Sequence[str] | None = None) -> dict[str, np.ndarray]:
-    """Reads a parquet or CSV file into float64 columns.
-
-    Args:
-        path: ``.parquet`` / ``.pq`` or ``.csv`` file.
-        columns: Only these columns (all when None); a missing one raises ValueError.
-
-    Returns:
-        Column name -> 1-D float array.
-    """
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no such log file: {path}")
-    suffix = path.suffix.lower()
-    try:
-        if suffix in (".parquet", ".pq"):
-            import pyarrow.parquet as pq
-
-            names = pq.read_schema(path).names
-            _check_columns(path, names, columns)
-            table = pq.read_table(path, columns=list(columns) if columns else None)
-        elif suffix == ".csv":
-            import pyarrow.csv as pcsv
-
-            table = pcsv.read_csv(path)
-            _check_columns(path, table.column_names, columns)
-            if columns:
-                table = table.select(list(columns))
-        else:
-            raise ValueError(f"{path}: unsupported log format {suffix!r} (use .parquet or .csv)")
-    except (OSError, ImportError) as exc:
-        raise ValueError(f"{path}: cannot read the log ({exc})") from None
-    out: dict[str, np.ndarray] = {}
-    for name in table.column_names:
-        try:
-            out[name] = table.column(name).to_numpy(zero_copy_only=False).astype(np.float64)
-        except (TypeError, ValueError):
-            if columns:
-                raise ValueError(f"{path}: column {name!r} is not numeric") from None
-    return out
-
-
-def _check_columns(path: Path, names: Sequence[str], wanted: Sequence[str] | None) -> None:
-    missing = [c for c in (wanted or []) if c not in names]
-    if missing:
-        raise ValueError(f"{path}: missing column(s) {missing}")
 
 
 # -- rotations --------------------------------------------------------------------------

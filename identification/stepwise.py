@@ -153,10 +153,7 @@ def stepwise_path(
         # backward: drop the cheapest chosen column while it costs < half this gain
         pruned = False
         while len(support) > 1:
-            q_s, r_s = np.linalg.qr(a[:, support])
-            r_inv = np.linalg.inv(r_s)
-            coef = r_inv @ (q_s.T @ b)
-            loss = coef**2 / np.maximum(np.einsum("ij,ij->i", r_inv, r_inv), 1e-300)
+            loss = _removal_costs(a, b, support)
             k = int(np.argmin(loss[:-1]))  # never the column just added
             if loss[k] >= BACKWARD_FRACTION * gain:
                 break
@@ -371,8 +368,7 @@ def _exchange_pairs(
         ]
         if not pairs:
             break
-        q = np.linalg.qr(a[:, support])[0]
-        rss = outside + float(b @ b) - float(np.sum((q.T @ b) ** 2))
+        rss = _support_rss(a, b, list(support), outside)
         sigma2 = rss / max(n_rows - len(support), 1.0)
         tried = sum(options[i].size * options[j].size for i, j in pairs)
         bar = float(chi2.isf(REPLACE_P / tried, 1)) * sigma2
@@ -516,9 +512,7 @@ def backward_path(
             path.append((tuple(sorted(support)), 0.0))
             support.pop(k)
             continue
-        r_inv = np.linalg.inv(r)
-        coef = r_inv @ (q.T @ b)
-        loss = coef**2 / np.maximum(np.einsum("ij,ij->i", r_inv, r_inv), 1e-300)
+        loss = _removal_costs(a, b, support, (q, r))
         k = int(np.argmin(loss))
         path.append((tuple(sorted(support)), float(loss[k])))
         support.pop(k)
@@ -564,6 +558,19 @@ def _better_support(
     k = max(len(support), len(chosen))
     bar = float(chi2.isf(REPLACE_P / max(k * (a.shape[1] - k), 1), 1))
     return tuple(sorted(chosen)) if gain > bar * sigma2 else support
+
+
+def _removal_costs(
+    a: np.ndarray,
+    b: np.ndarray,
+    support: Sequence[int],
+    qr: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """Increase of the RSS when each chosen column is removed: ``coef^2 / (R^-1 R^-T)_kk``."""
+    q, r = qr if qr is not None else np.linalg.qr(a[:, list(support)])
+    r_inv = np.linalg.inv(r)
+    coef = r_inv @ (q.T @ b)
+    return coef**2 / np.maximum(np.einsum("ij,ij->i", r_inv, r_inv), 1e-300)
 
 
 def _support_rss(a: np.ndarray, b: np.ndarray, cols: list[int], outside: float) -> float:

@@ -61,11 +61,13 @@ def ppo_zip(tmp_path_factory):
         (["compare", "--model", "{tmp}", "--out", "{tmp}/c"], ["is not a file"]),
         (["compare", "--model", "{binary}", "--out", "{tmp}/c"], ["not text"]),
         (["identify", "{binary}", "--out", "{tmp}/m.json"], ["is not a text CSV file"]),
+        (["identify", "{tmp}/bad.parquet", "--out", "{tmp}/m.json"], ["cannot read the log"]),
     ],
 )
 def test_user_mistakes_get_one_line(monkeypatch, capsys, tmp_path, args, fragments):
     a_file = tmp_path / "afile"
     a_file.write_text("just text\n")
+    (tmp_path / "bad.parquet").write_text("t,y\n0,1\n")  # not parquet inside
     binary = tmp_path / "model.json"
     binary.write_bytes(bytes(np.random.default_rng(0).integers(128, 256, 64, dtype=np.uint8)))
     names = {"tmp": tmp_path, "file": a_file, "binary": binary}
