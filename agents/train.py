@@ -22,6 +22,8 @@ def make_algo(algo: str, env: gym.Env, seed: int = 0, **kwargs: Any) -> Any:
     """A fresh PPO or SAC with small MLPs suited to these low-dimensional tasks."""
     from stable_baselines3 import PPO, SAC
 
+    if algo not in ALGOS:
+        raise ValueError(f"unknown algorithm {algo!r}; valid choices: {', '.join(ALGOS)}")
     if algo == "ppo":
         defaults = {
             "n_steps": 1024,
@@ -30,11 +32,25 @@ def make_algo(algo: str, env: gym.Env, seed: int = 0, **kwargs: Any) -> Any:
             "gamma": 0.99,
             "policy_kwargs": {"net_arch": [64, 64]},
         }
-        return PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **{**defaults, **kwargs})
-    if algo == "sac":
+        model = PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **{**defaults, **kwargs})
+    else:
         defaults = {"learning_starts": 1000, "policy_kwargs": {"net_arch": [64, 64]}}
-        return SAC("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **{**defaults, **kwargs})
-    raise ValueError(f"unknown algorithm {algo!r}; valid choices: {', '.join(ALGOS)}")
+        model = SAC("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **{**defaults, **kwargs})
+    return quiet_logger(model)
+
+
+def quiet_logger(model: Any) -> Any:
+    """Gives ``model`` a logger that writes nothing.
+
+    Without a logger of its own, every ``learn()`` of a quiet stable-baselines3 model creates
+    an empty ``SB3-<date>`` folder in the system's temporary directory (the default logger's
+    folder, which it makes even when it writes nothing): hundreds of them after a study.
+    """
+    from stable_baselines3.common.logger import Logger
+
+    if model.tensorboard_log is None:
+        model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
 
 
 def _positive(**values: int) -> None:
@@ -71,7 +87,7 @@ def load_agent(path: str | Path, algo: str | None = None) -> Any:
     found = saved_algo(path)
     if algo is not None and algo != found:
         raise ValueError(f"{path} holds a {found.upper()} agent, not {algo.upper()}")
-    return (PPO if found == "ppo" else SAC).load(path, device="cpu")
+    return quiet_logger((PPO if found == "ppo" else SAC).load(path, device="cpu"))
 
 
 def evaluate(

@@ -137,6 +137,18 @@ def test_sb3_smoke_and_determinism(algo):
     assert a.shape == (2,)
 
 
+def test_training_leaves_no_empty_log_folders_in_the_temporary_directory(monkeypatch, tmp_path):
+    """stable-baselines3's default logger makes an empty SB3-<date> folder per learn()."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    env = gym.make("PlanarQuad-v0", **HOVER_TASK)
+    make_algo("ppo", env, seed=0, n_steps=32, batch_size=32).learn(32)
+    assert tempfile.gettempdir() == str(tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_surrogates_step_the_compiled_model_and_fall_back_with_a_warning(monkeypatch):
     from identification import surrogate
     from identification.compiled import CompiledRhs
