@@ -83,9 +83,11 @@ def test_vector_env_equals_single_envs(env_id):
 def test_ppo_learns_a_few_steps_on_the_identified_crazyflie():
     from stable_baselines3 import PPO
 
+    from agents.train import quiet_logger
+
     env = _make("CrazyflieSINDy-v0", normalize_actions=True)
     agent = PPO("MlpPolicy", env, n_steps=128, batch_size=64, n_epochs=1, seed=0,
                 policy_kwargs={"net_arch": [16]}, device="cpu")  # fmt: skip
-    agent.learn(256)
+    quiet_logger(agent).learn(256)
     action, _ = agent.predict(env.reset(seed=0)[0], deterministic=True)
     assert env.action_space.contains(action)
