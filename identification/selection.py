@@ -64,6 +64,7 @@ from identification.fit import (
     check_identifiable,
     fit_coefficients,
     grams,
+    iter_rows,
     serial_blas,
     solve,
     solve_lambdas,
@@ -81,6 +82,9 @@ shortest trajectory or more is skipped). 64 lets the validation average sigma = 
 BAG_T = 2.0
 """A kept term's coefficient must exceed this many standard deviations of its bootstrap fits,
 or the full data must reject its removal (F-test), to stay in the model."""
+
+PRUNE_P = 1e-3
+"""Significance of a kept term (Bonferroni over the library: see :func:`prune_insignificant`)."""
 
 F_CRITICAL = 10.83
 """F(1, inf) quantile at p = 0.001: a swap to the simpler term of a near-collinear pair is
@@ -401,6 +405,82 @@ def resolve_collinear(
     return xi, notes
 
 
+def long_run_ratio(
+    trajs: Sequence[Trajectory], names: Sequence[str], xi: np.ndarray, window: int
+) -> np.ndarray:
+    """Per equation: the long-run variance of the RK4 rows' residuals over their variance.
+
+    Bartlett weights up to lag ``4 window`` (at least 8), autocovariances pooled over the
+    trajectories, residuals in time order. 1 for uncorrelated residuals; above 1 where they
+    are smooth over the window (the noise inside window-averaged columns, or model error),
+    where every row counted as an independent sample overstates how significant a term is.
+    """
+    lags = max(4 * window, 8)
+    parts: dict[int, list[np.ndarray]] = {}
+    for index, theta, y in iter_rows(trajs, names, "rk4", window, xi):
+        parts.setdefault(index, []).append(y - theta @ xi.T)
+    gamma0 = np.zeros(xi.shape[0])
+    long_run = np.zeros(xi.shape[0])
+    for chunks in parts.values():
+        e = np.concatenate(chunks)
+        g0 = np.einsum("ij,ij->j", e, e)
+        gamma0 += g0
+        long_run += g0
+        for lag in range(1, min(lags, len(e) // 2)):
+            long_run += 2.0 * (1.0 - lag / lags) * np.einsum("ij,ij->j", e[lag:], e[:-lag])
+    return np.maximum(long_run, 0.0) / np.maximum(gamma0, 1e-300)
+
+
+def prune_insignificant(
+    xi: np.ndarray,
+    gram: Gram,
+    ratio: np.ndarray,
+    feature_names: Sequence[str],
+    state_names: Sequence[str],
+) -> tuple[np.ndarray, list[str]]:
+    """Backward elimination of the terms the data do not need, against an honest variance.
+
+    A term of the model was chosen as the best of ``p`` candidates, so its removal cost must
+    pass the Bonferroni bar for the best of ``p`` (chi-square(1) at :data:`PRUNE_P` / p), in
+    residual variances scaled by the residuals' long-run ratio where that is above 1
+    (:func:`long_run_ratio`). The cheapest failing term is removed and the rest refitted,
+    until every term passes.
+
+    Returns:
+        The coefficients (refitted where changed) and one warning per equation pruned.
+    """
+    from scipy.stats import chi2
+
+    from identification.stepwise import _removal_costs
+
+    bar = float(chi2.isf(PRUNE_P / max(gram.p, 1), 1))
+    xi = xi.copy()
+    notes = []
+    for i, state in enumerate(state_names):
+        support = list(np.flatnonzero(xi[i]))
+        scale = max(float(ratio[i]), 1.0)
+        dropped = []
+        while len(support) > 1:
+            _, sigma2 = _residual_variance(gram, i, support)
+            costs = _removal_costs(gram.r, gram.z[:, i], support) / (scale * sigma2)
+            k = int(np.argmin(costs))
+            if costs[k] >= bar:
+                break
+            dropped.append(f"{term_name(parse_term(feature_names[support[k]]))!r} "
+                           f"({costs[k]:.3g})")  # fmt: skip
+            support.pop(k)
+        if dropped:
+            row = np.zeros(xi.shape[1])
+            row[support] = _rss(gram.r, gram.z[:, i], support)[1]
+            xi[i] = row
+            notes.append(
+                f"{state}': dropped {', '.join(dropped)}: removing each costs less than "
+                f"{bar:.3g} residual variances (the bar for the best of {gram.p} terms; "
+                f"variance x {scale:.3g} for the residual's correlation over the window)"
+            )
+    return xi, notes
+
+
 def indistinguishable_twins(
     xi: np.ndarray,
     gram: Gram,
@@ -563,7 +643,8 @@ def select_model(
         f"score = RMS of the {horizon}-step open-loop prediction error normalised by each "
         "state's standard deviation; chosen: the fewest terms within one standard error of "
         f"the best mean score plus the scores' own integrator error ({resolution:.2g}); "
-        "refitted on all data with the backward-elimination check"
+        "refitted on all data with the backward-elimination check; terms that do not pass "
+        "the Bonferroni bar against the residuals' long-run variance dropped"
     )
     report = SelectionReport(candidates, chosen, k, horizon, rule)
 
@@ -571,6 +652,9 @@ def select_model(
     xi = fit_coefficients(trajs, names, final_cfg, pilots[best.window])
     final_gram = Gram.stack(grams(trajs, names, "rk4", best.window, xi))
     xi, notes = resolve_collinear(xi, final_gram, names, first.state_names, best.window)
+    report.warnings += notes
+    ratio = long_run_ratio(trajs, names, xi, best.window)
+    xi, notes = prune_insignificant(xi, final_gram, ratio, names, first.state_names)
     report.warnings += notes
     report.warnings += indistinguishable_twins(xi, final_gram, names, first.state_names,
                                                best.window)  # fmt: skip

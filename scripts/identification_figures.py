@@ -186,6 +186,15 @@ def main() -> None:
         row(f"ours: 6-DOF m=0.8 sigma={sigma:g}", model, truth_quad6dof(OTHER_6DOF),
             quad6dof_drag_rhs(OTHER_6DOF, 0.0), clean6, time.perf_counter() - t0,
             report, noisy6)  # fmt: skip
+    if args.noisy_6dof:
+        # larger tilts (open loop swings to 0.8 rad) with noise: the twins differ more there
+        open6 = quad6dof_flights(OTHER_6DOF, FlightSpec(flights=4, open_loop=True))
+        noisy6 = add_noise(open6, 1e-3)
+        t0 = time.perf_counter()
+        model, report = select_model(noisy6, quad6dof_library(), config=config)
+        row("ours: 6-DOF open loop sigma=0.001", model, truth_quad6dof(OTHER_6DOF),
+            quad6dof_drag_rhs(OTHER_6DOF, 0.0), open6, time.perf_counter() - t0,
+            report, noisy6)  # fmt: skip
 
 
 def diagnose_6dof(config, sigma=1e-3):

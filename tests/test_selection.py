@@ -242,6 +242,23 @@ def test_six_dof_open_loop_flights_with_drag_give_the_drag_terms_and_the_exact_m
     assert rhs_error(model, quad6dof_drag_rhs(OTHER_6DOF, 0.3), trajs) < 1e-5
 
 
+def test_noisy_six_dof_flights_at_large_tilt_keep_every_true_term_and_few_noise_terms():
+    """Open-loop swings to 0.8 rad with sigma = 1e-3: the twins differ there, every true term
+    is found; the terms that only fit noise (18 before the long-run significance pruning,
+    with removal costs of 0 to 60 residual variances against 15,000 and more for the true
+    ones) are mostly dropped."""
+    from identification.experiments.synthetic import OTHER_6DOF, quad6dof_flights, truth_quad6dof
+    from identification.libraries import default_library
+
+    trajs = add_noise(quad6dof_flights(OTHER_6DOF, FlightSpec(flights=4, open_loop=True)), 1e-3)
+    model, report = select_model(trajs, default_library("quad6dof"), n_models=5)
+    check = check_support(model, truth_quad6dof(OTHER_6DOF))
+    assert check.missed == ()
+    assert len(check.spurious) <= 8, check.spurious
+    assert check.max_rel_error < 0.02
+    assert any("dropped" in w and "residual variances" in w for w in report.warnings)
+
+
 def test_sigma_1e2_noise_on_a_heavy_vehicle_keeps_the_support_within_two_terms():
     """sigma = 1e-2 state noise (issue 9 goal): <= 2 terms off, 1 s simulation error < 5 %."""
     clean_trajs = planar_flights(HEAVY, FlightSpec(integrator="solve_ivp", seed=3))
@@ -555,3 +572,44 @@ def test_truth_gaps_separate_a_search_miss_from_twins_the_data_cannot_tell_apart
     gaps = truth_gaps(model, truth, trajs, 16)
     assert list(gaps) == ["y"] and abs(gaps["y"]) < 10.83
     assert worse_than_truth(model, truth, trajs, 16) == []
+
+
+def test_long_run_ratio_is_one_for_white_residuals_and_the_bartlett_sum_for_smooth_ones():
+    from identification.selection import long_run_ratio
+
+    rng = np.random.default_rng(0)
+    n, dt, phi = 40_000, 0.01, 0.8
+    white = rng.normal(size=n)
+    smooth = np.zeros(n)
+    for k in range(1, n):
+        smooth[k] = phi * smooth[k - 1] + white[k]
+    trajs = []
+    for rate in (white, smooth):
+        x = np.concatenate([[0.0], np.cumsum(rate * dt)])[:, None]  # x' = rate (residual)
+        t = np.arange(n + 1) * dt
+        trajs.append(Trajectory(t, x, np.ones((n + 1, 1)), ("x",), ("u1",)))
+    xi = np.zeros((1, 1))  # the model x' = 0 * 1: the residual is the rate itself
+    assert long_run_ratio(trajs[:1], ["1"], xi, 1)[0] == pytest.approx(1.0, abs=0.05)
+    lags = 8  # window 1: Bartlett weights up to lag 8
+    expected = 1 + 2 * sum((1 - k / lags) * phi**k for k in range(1, lags))
+    assert long_run_ratio(trajs[1:], ["1"], xi, 1)[0] == pytest.approx(expected, rel=0.1)
+
+
+def test_pruning_drops_noise_terms_and_keeps_small_real_ones_against_the_long_run_variance():
+    from identification.fit import Gram
+    from identification.selection import prune_insignificant
+
+    rng = np.random.default_rng(1)
+    n = 5000
+    theta = rng.normal(size=(n, 4))  # a1 (large), a2 (noise), a3 (small but real), a4 (noise)
+    y = 2.0 * theta[:, 0] + 0.05 * theta[:, 2] + 0.1 * rng.normal(size=n)
+    gram = Gram.from_rows(theta, y[:, None])
+    names = ["x", "y", "z", "w"]
+    xi = np.linalg.lstsq(theta, y, rcond=None)[0][None, :]  # all four in the model
+    pruned, notes = prune_insignificant(xi, gram, np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(pruned[0])) == [0, 2]  # a3 costs ~1250 variances: kept
+    assert "'y'" in notes[0] and "'w'" in notes[0]
+    # residuals 100 times more variable in the long run (smooth): a3 is no longer resolved
+    pruned, _ = prune_insignificant(xi, gram, np.array([100.0]), names, ["s"])
+    assert list(np.flatnonzero(pruned[0])) == [0]
+    np.testing.assert_allclose(pruned[0, 0], np.linalg.lstsq(theta[:, :1], y, rcond=None)[0])
