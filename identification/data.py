@@ -149,6 +149,7 @@ class CleanReport:
     Attributes:
         rows_in: Rows given.
         stale_rows: Rows dropped because they repeat the previous row's states (or time).
+        nonfinite_rows: Rows dropped because a value is NaN or infinite.
         outlier_rows: Rows dropped as outliers (robust z-score of the state).
         gaps: Time gaps (step > ``gap_factor`` x median step) where the log was split.
         short_segments: Segments dropped as too short.
@@ -159,6 +160,7 @@ class CleanReport:
 
     rows_in: int = 0
     stale_rows: int = 0
+    nonfinite_rows: int = 0
     outlier_rows: int = 0
     gaps: int = 0
     short_segments: int = 0
@@ -178,7 +180,8 @@ class CleanReport:
         """One line for users."""
         return (
             f"{self.rows_in} rows -> {self.rows_out} rows in {self.segments} segment(s); "
-            f"dropped {self.stale_rows} stale/repeated, {self.outlier_rows} outlier rows, "
+            f"dropped {self.stale_rows} stale/repeated, {self.nonfinite_rows} non-finite, "
+            f"{self.outlier_rows} outlier rows, "
             f"{self.short_segments} short segment(s); split at {self.gaps} gap(s); "
             f"time-step jitter {100 * self.jitter:.1f} % (each row's own step is used)"
         )
@@ -197,8 +200,10 @@ def clean(
     """Splits a raw log into clean segments: stale rows, outliers and gaps removed.
 
     A row is *stale* when its time does not advance, or when its states repeat the previous
-    row's exactly while the vehicle moves before and after (a logger that re-sent an old
-    sample; repeats at rest are kept). A row is an *outlier* when a state is
+    row's exactly after the vehicle moved into that row: a logger that re-sent an old sample
+    (one row or a run of them; a moving system cannot stop dead between two samples). Repeats
+    entered at rest (the step into the repeated row at round-off of the states' spread, or the
+    log's first row) are kept: an exact equilibrium. A row is an *outlier* when a state is
     further than ``outlier_z`` robust standard deviations (1.4826 MAD over the log, at least
     1 % of the state's standard deviation) from the straight line through its two
     neighbours. Dropped rows and time gaps longer than
@@ -227,13 +232,23 @@ def clean(
     stale = np.zeros(t.size, dtype=bool)
     same = np.zeros(t.size, dtype=bool)
     same[1:] = np.all(x[1:] == x[:-1], axis=1)  # row k repeats row k-1
-    moving_before = np.concatenate([[False, False], ~same[1:-1]])
-    moving_after = np.concatenate([~same[1:], [False]])
-    # a repeat inside motion is a logger re-sending; repeats at rest are real (equilibrium)
-    stale[1:] = (np.diff(t) <= 0) | (same & moving_before & moving_after)[1:]
+    # A run of repeats of row k-1 is a logger re-sending it when the vehicle moved into row
+    # k-1 (a step above round-off of the states' spread); entered at rest, an equilibrium.
+    spread = np.nanstd(np.where(finite[:, None], x, np.nan), axis=0) if finite.any() else 0.0
+    tiny = 1e-9 * np.maximum(np.nan_to_num(spread), 1e-300)
+    moved = np.zeros(t.size, dtype=bool)  # the step into row k is motion
+    moved[1:] = np.any(np.abs(x[1:] - x[:-1]) > tiny, axis=1)
+    run_start = same & ~np.concatenate([[False], same[:-1]])
+    starts = np.flatnonzero(run_start)  # first repeat of each run (>= 1: same[0] is False)
+    resent = np.zeros(t.size, dtype=bool)
+    if starts.size:
+        run_of = np.maximum(np.cumsum(run_start) - 1, 0)  # each row's latest run
+        resent = same & moved[starts - 1][run_of]
+    stale[1:] = (np.diff(t) <= 0) | resent[1:]
     stale[1:] |= t[1:] <= np.maximum.accumulate(t)[:-1]  # any step back in time
     keep &= ~stale & finite
-    report.stale_rows = int((stale | ~finite).sum())
+    report.stale_rows = int((stale & finite).sum())
+    report.nonfinite_rows = int((~finite).sum())
     idx = np.flatnonzero(keep)
     outliers = np.zeros(t.size, dtype=bool)
     if idx.size >= 5:
@@ -325,8 +340,11 @@ def resolve_names(
         if unknown:
             valid = [time, *known_s, *known_i, "_", "*_ref", "*_cmd"]
             raise ValueError(f"unknown column name(s) {unknown}; valid names: {valid}")
-        st = [c for c in known_s if c in cols]
-        inp = [c for c in known_i if c in cols]
+        absent = [c for c in (*known_s, *known_i) if c not in cols]
+        if absent:
+            raise ValueError(f"no column(s) {absent} (the {system} preset needs them); columns "
+                             f"are {cols}")  # fmt: skip
+        st, inp = list(known_s), list(known_i)
     else:
         candidates = [c for c in cols if c != time and not _ignored(c)]
         if inputs is None:
@@ -580,17 +598,30 @@ def load_data(
     """
     trajs: list[Trajectory] = []
     report = CleanReport()
+    first: tuple[str, tuple[str, ...]] | None = None
     for path in paths:
-        if str(path).endswith(".npz"):
-            for tr in load_npz(path):
-                segs, rep = clean(tr.t, tr.x, tr.u, tr.state_names, tr.input_names)
-                trajs.extend(segs)
+        try:
+            if str(path).endswith(".npz"):
+                segs = []
+                for tr in load_npz(path):
+                    part, rep = clean(tr.t, tr.x, tr.u, tr.state_names, tr.input_names)
+                    segs += part
+                    report = report.merge(rep)
+            else:
+                segs, rep = read_log(path, columns, system, states, inputs, time)
                 report = report.merge(rep)
-        else:
-            segs, rep = read_log(path, columns, system, states, inputs, time)
-            trajs.extend(segs)
-            report = report.merge(rep)
-    names = {(tr.state_names, tr.input_names) for tr in trajs}
-    if len(names) > 1:
-        raise ValueError(f"the files name different variables: {sorted(names)}")
+        except ValueError as exc:
+            message = str(exc)
+            raise ValueError(message if str(path) in message else f"{path}: {message}") from None
+        if not segs:
+            raise ValueError(f"{path}: no trajectories in the file")
+        variables = (*segs[0].state_names, *segs[0].input_names)
+        if first is None:
+            first = (str(path), variables)
+        elif variables != first[1]:
+            raise ValueError(
+                f"{path} has the variables {list(variables)} but {first[0]} has "
+                f"{list(first[1])}: every file must log the same states and inputs"
+            )
+        trajs.extend(segs)
     return trajs, report

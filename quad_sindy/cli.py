@@ -224,7 +224,7 @@ def identify(
         trajs, cleaning = load_data(
             data, split(columns), preset, split(states), split(inputs), time.strip()
         )
-        if cleaning.rows_out != cleaning.rows_in or cleaning.jitter > 1e-6:
+        if cleaning.rows_out != cleaning.rows_in or cleaning.gaps or cleaning.jitter > 1e-6:
             typer.echo(f"data: {cleaning.summary()}")
         first = trajs[0]
         library_note = None

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from identification.data import Trajectory, clean, write_trajectory_csv
+from identification.data import Trajectory, clean, load_data, write_trajectory_csv
 from identification.experiments.synthetic import (
     OTHER_PLANAR,
     FlightSpec,
@@ -148,6 +148,58 @@ def test_clean_drops_stale_rows_and_outliers_and_splits_at_gaps(other_clean):
     assert (report.stale_rows, report.outlier_rows, report.gaps) == (1, 1, 1)
     assert report.segments == len(segs) == 4 and report.rows_out == len(tr) - 2
     assert all(np.all(np.diff(s.t) < 0.02) for s in segs)
+
+
+def test_a_run_of_resent_rows_inside_motion_is_stale_and_a_rest_is_not(other_clean):
+    """20 rows re-sent by a stalled logger (time advancing) froze z_dot' to 0 before: a run
+    entered while moving is dropped whole; identical rows entered at rest are an equilibrium."""
+    tr = other_clean[0]
+    x = tr.x.copy()
+    x[301:321] = x[300]  # states frozen, time and inputs advance
+    x[450] = np.nan
+    segs, report = clean(tr.t, x, tr.u, PS, PI)
+    assert (report.stale_rows, report.nonfinite_rows) == (20, 1)
+    assert report.rows_out == len(tr) - 21 and report.segments == 3
+    assert all(not np.any(np.all(s.x[1:] == s.x[:-1], axis=1)) for s in segs)
+    rest = tr.x.copy()
+    rest[:40] = rest[0]  # on the ground before take-off: entered at rest (the log's start)
+    segs, report = clean(tr.t, rest, tr.u, PS, PI)
+    assert report.stale_rows == 0 and segs[0].t[0] == 0.0 and len(segs[0]) >= 40
+
+
+def test_identify_drops_a_stalled_logger_run_and_finds_gravity(other_clean, tmp_path):
+    paths = []
+    for i, tr in enumerate(other_clean):
+        x = tr.x.copy()
+        if i == 0:
+            x[301:321] = x[300]
+        paths.append(
+            str(write_trajectory_csv(tmp_path / f"f{i}.csv", Trajectory(tr.t, x, tr.u, PS, PI)))
+        )
+    out = tmp_path / "m.json"
+    result = CliRunner().invoke(app, ["identify", *paths, "--out", str(out), "--system", "planar"])
+    assert result.exit_code == 0, result.output
+    assert "dropped 20 stale/repeated" in result.output
+    check = check_support(load_model(out), truth_planar(OTHER_PLANAR))
+    assert check.exact_support, (check.missed, check.spurious)
+
+
+def test_load_data_names_the_file_that_is_too_short_or_logs_other_variables(other_clean, tmp_path):
+    good = str(write_trajectory_csv(tmp_path / "good.csv", other_clean[0]))
+    tr = other_clean[1]
+    short = str(
+        write_trajectory_csv(
+            tmp_path / "short.csv", Trajectory(tr.t[:5], tr.x[:5], tr.u[:5], PS, PI)
+        )
+    )
+    with pytest.raises(ValueError, match=r"short\.csv: no segment of at least 20"):
+        load_data([good, short], system="planar")
+    fewer = Trajectory(tr.t, tr.x[:, :5], tr.u, PS[:5], PI)
+    path = str(write_trajectory_csv(tmp_path / "fewer.csv", fewer))
+    with pytest.raises(ValueError, match=r"no column\(s\) \['phi_dot'\] \(the planar preset"):
+        load_data([good, path], system="planar")
+    with pytest.raises(ValueError, match=r"fewer\.csv has the variables .* but .*good\.csv has"):
+        load_data([good, path], system=None)
 
 
 # -- noise and near-collinear terms (stepwise selection) ---------------------------------
