@@ -366,18 +366,19 @@ def resolve_collinear(
     feature_names: Sequence[str],
     state_names: Sequence[str],
     window: int,
-) -> tuple[np.ndarray, list[str]]:
+) -> tuple[np.ndarray, dict[tuple[int, int, int], str]]:
     """Prefers the simpler term of each near-collinear pair the data cannot tell apart.
 
     Returns:
-        The coefficients (refitted where changed) and one warning per resolved pair.
+        The coefficients (refitted where changed) and a warning per resolved pair, keyed by
+        (equation, simple column, complex column).
     """
     pairs = collinear_pairs(gram, feature_names)
     if not pairs:
-        return xi, []
+        return xi, {}
     a, z = gram.r, gram.z
     xi = xi.copy()
-    notes = []
+    notes = {}
     for i, state in enumerate(state_names):
         support = list(np.flatnonzero(xi[i]))
         for simple, complex_, cosine in pairs:
@@ -391,7 +392,7 @@ def resolve_collinear(
             if (rss_new - rss) <= F_CRITICAL * sigma2:
                 support = sorted(trial)
                 kept = "both" if simple in np.flatnonzero(xi[i]) else "the complex one"
-                notes.append(
+                notes[i, simple, complex_] = (
                     f"{state}': {term_name(parse_term(feature_names[simple]))!r} and "
                     f"{term_name(parse_term(feature_names[complex_]))!r} are nearly collinear "
                     f"on this data (|cos| = {cosine:.6f}; the fit had {kept}): kept the "
@@ -431,6 +432,96 @@ def long_run_ratio(
     return np.maximum(long_run, 0.0) / np.maximum(gamma0, 1e-300)
 
 
+GROW_POOL = 10
+"""Columns outside a support that enter :func:`grow_significant`'s pool: those that best explain
+its residual (every near twin of a pooled column enters too)."""
+
+
+def _significance_bar(p: int) -> float:
+    """Chi-square(1) at :data:`PRUNE_P` / p: the bar for the best of p candidate terms."""
+    from scipy.stats import chi2
+
+    return float(chi2.isf(PRUNE_P / max(p, 1), 1))
+
+
+def grow_significant(
+    xi: np.ndarray,
+    gram: Gram,
+    ratio: np.ndarray,
+    feature_names: Sequence[str],
+    state_names: Sequence[str],
+) -> tuple[np.ndarray, list[str]]:
+    """Adds the terms the data need where the greedy path, holding a wrong twin, stopped short.
+
+    At small tilt the path can enter a twin of a true term (``sin(phi) sin(psi) w`` for
+    ``sin(phi) sin(psi) cos(theta) w``); then a small true term is never its best next entry
+    and the threshold stops the path before it. Here each equation's best supports of its
+    size and of one term more are found exhaustively (:func:`~identification.stepwise.best_subset`)
+    within a pool: the chosen terms, the :data:`GROW_POOL` columns that best explain the
+    residual, and every near twin (|cos| > 0.99) of these; no two columns with
+    |cos| > 0.999 together. The larger support is taken when it explains more than the
+    significance bar of :func:`prune_insignificant` (the Bonferroni bar for the best of p
+    terms, variance scaled by the long-run ratio), and the search repeats from it.
+
+    Returns:
+        The coefficients (refitted where changed) and one note per equation grown.
+    """
+    from identification.stepwise import best_subset
+
+    bar = _significance_bar(gram.p)
+    a = gram.r / np.maximum(gram.col_norms, 1e-300)
+    g = a.T @ a
+    cos = np.abs(g)
+    np.fill_diagonal(cos, 0.0)
+    near, twin = cos > 0.99, cos > 0.999
+    usable = np.diag(g) > 0.5  # unit columns (an all-zero column has norm 0)
+    xi = xi.copy()
+    notes = []
+    for i, state in enumerate(state_names):
+        support = [int(j) for j in np.flatnonzero(xi[i])]
+        if not support:
+            continue
+        b = gram.z[:, i]
+        c = a.T @ b
+        total = float(np.linalg.norm(gram.r_aug[:, gram.p + i]) ** 2)
+        scale = max(float(ratio[i]), 1.0)
+        start = list(support)
+        while True:
+            q = np.linalg.qr(a[:, support])[0]
+            resid = b - q @ (q.T @ b)
+            perp = a - q @ (q.T @ a)
+            p2 = np.einsum("ij,ij->j", perp, perp)
+            fit2 = (perp.T @ resid) ** 2 / np.maximum(p2, 1e-300)
+            gains = np.where(usable & (p2 > 1e-10), fit2, 0.0)
+            gains[support] = 0.0
+            top = [int(j) for j in np.argsort(gains)[::-1][:GROW_POOL] if gains[j] > 0]
+            base = sorted({*support, *top})
+            pool = sorted({*base, *np.flatnonzero(near[:, base].any(axis=1) & usable)})
+            now = best_subset(g, c, pool, len(support), twin)
+            bigger = best_subset(g, c, pool, len(support) + 1, twin)
+            if now is None or bigger is None:
+                break
+            explained_now = max(now[0], float(b @ b) - _rss(a, b, support)[0])
+            sigma2 = (total - bigger[0]) / max(float(gram.rows) - len(bigger[1]), 1.0)
+            if bigger[0] - explained_now <= bar * scale * sigma2:
+                break
+            support = list(bigger[1])
+        if sorted(support) != sorted(start):
+            row = np.zeros(xi.shape[1])
+            row[support] = _rss(gram.r, b, support)[1]
+            xi[i] = row
+            name = lambda js: ", ".join(repr(term_name(parse_term(feature_names[j]))) for j in js)  # noqa: E731
+            added = [j for j in support if j not in start]
+            removed = [j for j in start if j not in support]
+            notes.append(
+                f"{state}': the best support of {len(support)} terms among the near twins of "
+                f"its terms and its best next entries added {name(added)}"
+                + (f" in place of {name(removed)}" if removed else "")
+                + f" (each step past the bar of {bar:.3g} residual variances x {scale:.3g})"
+            )
+    return xi, notes
+
+
 def prune_insignificant(
     xi: np.ndarray,
     gram: Gram,
@@ -449,11 +540,9 @@ def prune_insignificant(
     Returns:
         The coefficients (refitted where changed) and one warning per equation pruned.
     """
-    from scipy.stats import chi2
-
     from identification.stepwise import _removal_costs
 
-    bar = float(chi2.isf(PRUNE_P / max(gram.p, 1), 1))
+    bar = _significance_bar(gram.p)
     xi = xi.copy()
     notes = []
     for i, state in enumerate(state_names):
@@ -487,19 +576,20 @@ def indistinguishable_twins(
     feature_names: Sequence[str],
     state_names: Sequence[str],
     window: int,
-) -> list[str]:
+) -> dict[tuple[int, int, int], str]:
     """Warnings for chosen terms whose near-collinear twin fits the data as well.
 
     For each chosen term with a near-collinear twin (see :func:`collinear_pairs`) outside the
     model, the twin is put in its place; when the residual changes by no more than the F-test
     resolves (p = 0.001, every row an effective sample), the data cannot tell the two
     apart, and the warning names the pair and the term kept (the simpler, by construction).
+    Keyed by (equation, simple column, complex column).
     """
     pairs = collinear_pairs(gram, feature_names)
     if not pairs:
-        return []
+        return {}
     a, z = gram.r, gram.z
-    notes = []
+    notes = {}
     for i, state in enumerate(state_names):
         support = list(np.flatnonzero(xi[i]))
         if not support:
@@ -512,7 +602,7 @@ def indistinguishable_twins(
                 trial = [other if c == kept else c for c in support]
                 change = _rss(a, z[:, i], trial)[0] - rss
                 if change <= F_CRITICAL * sigma2:
-                    notes.append(
+                    notes[i, simple, complex_] = (
                         f"{state}': {term_name(parse_term(feature_names[simple]))!r} and "
                         f"{term_name(parse_term(feature_names[complex_]))!r} are nearly "
                         f"collinear on this data (|cos| = {cosine:.6f}) and fit it equally "
@@ -651,16 +741,21 @@ def select_model(
     final_cfg = dataclasses.replace(base, lam=best.lam, window=best.window)
     xi = fit_coefficients(trajs, names, final_cfg, pilots[best.window])
     final_gram = Gram.stack(grams(trajs, names, "rk4", best.window, xi))
-    xi, notes = resolve_collinear(xi, final_gram, names, first.state_names, best.window)
-    report.warnings += notes
     ratio = long_run_ratio(trajs, names, xi, best.window)
+    path_xi = xi
+    xi, notes = grow_significant(xi, final_gram, ratio, names, first.state_names)
+    report.warnings += notes
+    grown = {i: list(np.flatnonzero(xi[i])) for i in range(xi.shape[0])
+             if set(np.flatnonzero(xi[i])) != set(np.flatnonzero(path_xi[i]))}  # fmt: skip
+    xi, resolved = resolve_collinear(xi, final_gram, names, first.state_names, best.window)
     xi, notes = prune_insignificant(xi, final_gram, ratio, names, first.state_names)
     report.warnings += notes
-    report.warnings += indistinguishable_twins(xi, final_gram, names, first.state_names,
-                                               best.window)  # fmt: skip
+    twins = indistinguishable_twins(xi, final_gram, names, first.state_names, best.window)
+    report.warnings += list({**resolved, **twins}.values())  # one warning per pair
     std = prob = None
     if n_models > 0:
-        xi, std, prob, dropped = _bootstrap(trajs, names, final_cfg, xi, n_models, seed)
+        xi, std, prob, dropped = _bootstrap(trajs, names, final_cfg, xi, n_models, seed,
+                                            (grown, ratio))  # fmt: skip
         report.warnings += dropped
     tally = TALLY.summary()
     if tally:
@@ -698,8 +793,15 @@ def _bootstrap(
     xi: np.ndarray,
     n_models: int,
     seed: int,
+    grown: tuple[dict[int, list[int]], np.ndarray] = ({}, np.ones(0)),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
-    """Block bootstrap of the chosen fit: spread, inclusion probability, E-SINDy thresholding."""
+    """Block bootstrap of the chosen fit: spread, inclusion probability, E-SINDy thresholding.
+
+    ``grown``: the supports :func:`grow_significant` chose ({equation: columns}) and the
+    long-run ratios. A bag takes such a support in place of its own path's where its own
+    rows pass the same bar (each added term past the Bonferroni bar, or a better fit at no
+    more terms), so the inclusion probabilities describe the procedure that made the model.
+    """
     w = config.window
     n_blocks = 40 if len(names) < 100 else 12
     total = sum(len(t) for t in trajs)
@@ -713,9 +815,21 @@ def _bootstrap(
     block_grams = grams(blocks, names, "rk4", w, xi)
     rng = np.random.default_rng(seed)
     bags = []
+    supports, ratio = grown
+    bar = _significance_bar(len(names))
     for _ in range(n_models):
         weights = rng.multinomial(len(blocks), np.full(len(blocks), 1.0 / len(blocks)))
-        bags.append(solve(Gram.stack(block_grams, list(weights.astype(float))), config, names))
+        bag_gram = Gram.stack(block_grams, list(weights.astype(float)))
+        bag = solve(bag_gram, config, names)
+        for i, support in supports.items():
+            own = list(np.flatnonzero(bag[i]))
+            rss_own = _rss(bag_gram.r, bag_gram.z[:, i], own)[0]
+            rss_new, sigma2 = _residual_variance(bag_gram, i, support)
+            extra = max(len(support) - len(own), 0)
+            if rss_own - rss_new > bar * max(float(ratio[i]), 1.0) * sigma2 * extra:
+                bag[i] = 0.0
+                bag[i, support] = _rss(bag_gram.r, bag_gram.z[:, i], support)[1]
+        bags.append(bag)
     bags_a = np.array(bags)
     prob = np.mean(bags_a != 0, axis=0)
     std = bags_a.std(axis=0)  # the weak rule's scale (a wild bag only makes it cautious)
@@ -763,4 +877,24 @@ def _bootstrap(
                 f"fits, coefficient {xi_in[i, j]:.3g} (bootstrap deviation {std[i, j]:.2g}), "
                 "and the data do not need it (F-test)"
             )
-    return xi, bag_spread(bags_a), prob, notes
+    # Where the bags that leave a kept term out hold a near twin of it instead, its spread is
+    # the coefficient of that shared direction (the twin's, in the term's column scale), not
+    # a zero: the bags chose between columns the data cannot tell apart.
+    unit = full.r / np.maximum(full.col_norms, 1e-300)
+    shown = bags_a.copy()
+    for i, j in zip(*np.nonzero((xi != 0) & (prob < 1.0)), strict=True):
+        cos = unit.T @ unit[:, j]
+        group = [k for k in np.flatnonzero(np.abs(cos) > 0.999) if k != j]
+        if not group:
+            continue
+        scale = np.sign(cos[group]) * full.col_norms[group] / max(full.col_norms[j], 1e-300)
+        swapped = (bags_a[:, i, j] == 0) & (bags_a[:, i, group] != 0).any(axis=1)
+        if swapped.any():
+            shown[swapped, i, j] = bags_a[swapped][:, i, group] @ scale
+            kept = [names[k] for k in group if np.any(bags_a[swapped, i, k] != 0)]
+            notes.append(
+                f"{trajs[0].state_names[i]}': {np.mean(swapped):.0%} of the bootstrap fits hold "
+                f"its near twin {', '.join(map(repr, kept))} in place of {names[j]!r} (|cos| > "
+                "0.999 on this data); its spread is over that shared direction"
+            )
+    return xi, bag_spread(shown), prob, notes

@@ -600,3 +600,52 @@ def simpler_twins(
         if terms[k] < terms[j]:
             out.setdefault(int(j), []).append(int(k))
     return out
+
+
+SUBSET_LIMIT = 2_000_000
+"""Largest number of supports :func:`best_subset` enumerates (about a second of batched solves)."""
+
+
+def best_subset(
+    gram: np.ndarray, c: np.ndarray, pool: Sequence[int], k: int, twin: np.ndarray
+) -> tuple[float, tuple[int, ...]] | None:
+    """The k columns of ``pool`` that explain the most of the target (exhaustive).
+
+    Args:
+        gram: ``A^T A`` of unit-norm columns (p x p).
+        c: ``A^T b``.
+        pool: Candidate columns.
+        k: Support size.
+        twin: Pairs of columns that may not be chosen together (p x p, boolean): near
+            twins, whose pair would fit noise with large cancelling coefficients.
+
+    Returns:
+        ``(explained sum of squares, support)``, or None where the pool has more than
+        :data:`SUBSET_LIMIT` supports of size k.
+    """
+    import itertools
+    from math import comb
+
+    pool = np.asarray(pool)
+    if k <= 0 or k > len(pool) or comb(len(pool), k) > SUBSET_LIMIT:
+        return None
+    g = gram[np.ix_(pool, pool)] + 1e-12 * np.eye(len(pool))
+    cp = c[pool]
+    banned = twin[np.ix_(pool, pool)]
+    combos = itertools.combinations(range(len(pool)), k)
+    best: tuple[float, tuple[int, ...]] = (-np.inf, ())
+    while chunk := list(itertools.islice(combos, 100_000)):
+        s = np.array(chunk)
+        ok = np.ones(len(s), dtype=bool)
+        for i, j in itertools.combinations(range(k), 2):
+            ok &= ~banned[s[:, i], s[:, j]]
+        s = s[ok]
+        if not len(s):
+            continue
+        cs = cp[s]
+        explained = np.einsum("ij,ij->i", cs, np.linalg.solve(g[s[:, :, None], s[:, None, :]],
+                                                              cs[..., None])[..., 0])  # fmt: skip
+        j = int(np.argmax(explained))
+        if explained[j] > best[0]:
+            best = (float(explained[j]), tuple(sorted(int(pool[t]) for t in s[j])))
+    return best if best[1] else None

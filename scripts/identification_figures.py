@@ -117,6 +117,13 @@ def main() -> None:
         help="instead: where the sigma = 1e-3 6-DOF model is off the truth, equation by equation",
     )
     parser.add_argument(
+        "--truth-best-6dof",
+        type=int,
+        default=0,
+        help="instead: on the --sweep6 data, the equations whose true support is not the best "
+        "support of its size (no least-squares selection can return it there)",
+    )
+    parser.add_argument(
         "--sweep6",
         type=int,
         default=0,
@@ -132,6 +139,9 @@ def main() -> None:
         return
     if args.diagnose_6dof:
         diagnose_6dof(config)
+        return
+    if args.truth_best_6dof:
+        truth_best_6dof(args.truth_best_6dof)
         return
     print(
         "| case | time [s] | choice | terms | missed | spurious | equations worse than the "
@@ -246,6 +256,16 @@ def diagnose_6dof(config, sigma=1e-3):
     print(f"\n{state}': best {len(found)}-term support among the {len(pool)} near twins of the "
           f"found terms: {(best[0] - rss_true) / var:.1f} variances worse than the truth "
           f"({[names[j] for j in best[1]]})")  # fmt: skip
+    # Is the truth the best support of its size at all? Exhaustive over the truth's and the
+    # found terms' near twins: if another support fits better, no search can return the truth.
+    pool = sorted({*pool, *true, *(int(k) for j in true for k in np.flatnonzero(near[:, j]))})
+    best = min((_support_rss(a, b, list(c), outside), c)
+               for c in itertools.combinations(pool, len(true)))  # fmt: skip
+    other = [names[j] for j in best[1] if j not in true]
+    print(f"{state}': best {len(true)}-term support among the {len(pool)} near twins of the "
+          f"true and found terms: {(best[0] - rss_true) / var:.1f} variances against the truth"
+          + (f" (it holds {other} instead of {[names[j] for j in true if j not in best[1]]})"
+             if other else " (the truth itself)"))  # fmt: skip
     print(f"threshold floor lam^2 n = {lam**2 * n / var:.0f} variances; removal cost of each "
           "true term:")  # fmt: skip
     for j in true:
@@ -255,6 +275,67 @@ def diagnose_6dof(config, sigma=1e-3):
     print("stepwise path (gain in variances: support):")
     for support, gain in path[: len(true) + 2]:
         print(f"  {gain / var:.1f}: {[names[j] for j in support]}")
+
+
+def truth_best_6dof(seeds, window=64):
+    """Is the true support the best of its size on the data? (Truth: report only.)
+
+    For each equation of the ``--sweep6`` runs: every support of the true size among the true
+    terms and their near twins (|cos| > 0.99) is refitted by least squares on the same RK4 rows
+    (stage points from the truth, window 64: the window most runs choose). Where one fits
+    better than the truth, no selection by the fit (stepwise, best subset, thresholding) can
+    return the true support there: the data do not determine it.
+    """
+    import itertools
+
+    from identification.experiments.truth import truth_matrix
+    from identification.features import parse_term, term_name
+    from identification.fit import Gram, _scales, grams
+    from identification.stepwise import _support_rss
+
+    print("| vehicle | sigma | seed | equations where another support of the true size fits "
+          "better (gap in residual variances) |")  # fmt: skip
+    print("|---|---|---|---|")
+    vehicles = {"m=0.8 kg, RK4": (OTHER_6DOF, {}),
+                "m=2.0 kg, solve_ivp": (HEAVY_6DOF, {"integrator": "solve_ivp"})}  # fmt: skip
+    counts = {}
+    for name, (params, spec) in vehicles.items():
+        truth = truth_quad6dof(params)
+        for seed in range(seeds):
+            clean = quad6dof_flights(params, FlightSpec(flights=4, seed=seed, **spec))
+            for sigma in (1e-3, 1e-2):
+                noisy = add_noise(clean, sigma, seed=100 + seed)
+                states = list(noisy[0].state_names)
+                variables = [*states, *noisy[0].input_names]
+                names = [term_name(parse_term(t, variables)) for t in quad6dof_library()]
+                true_xi = truth_matrix(truth, states, names)
+                gram = Gram.stack(grams(noisy, names, "rk4", window, true_xi))
+                col, row_scale = _scales(gram, True)
+                a, n = gram.r / col, gram.rows
+                unit = a / np.maximum(np.linalg.norm(a, axis=0), 1e-300)
+                near = np.abs(unit.T @ unit) > 0.99
+                worse = []
+                for i, state in enumerate(states):
+                    b = gram.z[:, i] / row_scale[i]
+                    outside = n - float(b @ b)
+                    true = [int(j) for j in np.flatnonzero(true_xi[i])]
+                    rss_true = _support_rss(a, b, true, outside)
+                    pool = sorted(
+                        {*true, *(int(k) for j in true for k in np.flatnonzero(near[:, j]))}
+                    )
+                    best = min((_support_rss(a, b, list(c), outside), c)
+                               for c in itertools.combinations(pool, len(true)))  # fmt: skip
+                    if set(best[1]) != set(true):
+                        worse.append(
+                            f"{state}' {(best[0] - rss_true) / (rss_true / (n - len(true))):.1f}"
+                        )
+                counts.setdefault(sigma, []).append(len(worse))
+                print(f"| {name} | {sigma:g} | {seed} | {', '.join(worse) or 'none'} |", flush=True)
+    for sigma, c in counts.items():
+        print(
+            f"sigma = {sigma:g}: the truth is the best support in every equation on "
+            f"{sum(k == 0 for k in c)} of {len(c)} runs"
+        )
 
 
 def sweep(seeds, config):

@@ -665,3 +665,28 @@ def test_pruning_drops_noise_terms_and_keeps_small_real_ones_against_the_long_ru
     pruned, _ = prune_insignificant(xi, gram, np.array([100.0]), names, ["s"])
     assert list(np.flatnonzero(pruned[0])) == [0]
     np.testing.assert_allclose(pruned[0, 0], np.linalg.lstsq(theta[:, :1], y, rcond=None)[0])
+
+
+def test_growth_replaces_a_wrong_twin_and_adds_the_small_term_a_greedy_stop_missed():
+    """A support holding the twin `cos(phi) b` of the true `b` and missing the small `c`: the
+    best 3-term support in the pool is the truth; a support that is already right, beside 20
+    noise columns, does not grow."""
+    from identification.fit import Gram
+    from identification.selection import grow_significant
+
+    rng = np.random.default_rng(0)
+    a, b, e, c = rng.normal(size=(4, 4000))
+    theta = np.column_stack([a, b, b + 0.01 * e, c, rng.normal(size=(4000, 20))])
+    names = ["a", "b", "cos(phi) b", "c", *(f"n{k}" for k in range(20))]
+    y = 3 * a + b + 0.1 * c + 0.05 * rng.normal(size=4000)
+    start = np.zeros((1, len(names)))
+    start[0, [0, 2]] = [3.0, 1.0]
+    xi, notes = grow_significant(start, Gram.from_rows(theta, y[:, None]), np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(xi[0])) == [0, 1, 3]
+    np.testing.assert_allclose(xi[0, [0, 1, 3]], [3.0, 1.0, 0.1], rtol=1e-2)
+    assert "added 'b', 'c' in place of 'b cos(phi)'" in notes[0]
+    right = np.zeros((1, len(names)))
+    right[0, [0, 1]] = [3.0, 1.0]
+    y = 3 * a + b + 0.05 * rng.normal(size=4000)
+    xi, notes = grow_significant(right, Gram.from_rows(theta, y[:, None]), np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(xi[0])) == [0, 1] and notes == []
