@@ -891,10 +891,11 @@ def _bootstrap(
         swapped = (bags_a[:, i, j] == 0) & (bags_a[:, i, group] != 0).any(axis=1)
         if swapped.any():
             shown[swapped, i, j] = bags_a[swapped][:, i, group] @ scale
+        if np.mean(swapped) >= 0.5:  # why a kept term's inclusion probability is low
             kept = [names[k] for k in group if np.any(bags_a[swapped, i, k] != 0)]
             notes.append(
                 f"{trajs[0].state_names[i]}': {np.mean(swapped):.0%} of the bootstrap fits hold "
-                f"its near twin {', '.join(map(repr, kept))} in place of {names[j]!r} (|cos| > "
-                "0.999 on this data); its spread is over that shared direction"
+                f"a near twin of {names[j]!r} in its place ({', '.join(map(repr, kept))}; "
+                "|cos| > 0.999 on this data); its spread is over that shared direction"
             )
     return xi, bag_spread(shown), prob, notes

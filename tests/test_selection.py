@@ -348,10 +348,13 @@ def test_bootstrap_keeps_a_term_whose_twin_stands_in_for_it_in_the_other_bags(mo
 
     monkeypatch.setattr(selection, "solve", bag)
     xi = np.array([[2.0, 0.0, 0.1, 0.0]])
-    kept, _, prob, notes = selection._bootstrap([traj], names, FitConfig(window=1), xi, 9, 0)
+    kept, spread, prob, notes = selection._bootstrap([traj], names, FitConfig(window=1), xi, 9, 0)
     assert prob[0, 0] == pytest.approx(1 / 3) and prob[0, 2] == pytest.approx(1 / 3)
     assert kept[0, 0] != 0, "u1 is carried by its twin in the other bags: kept"
     assert kept[0, 2] == 0 and any("'u2'" in n for n in notes), "u2 alone is weak: dropped"
+    # u1's spread is over the shared direction (2.0 in every bag), not the 0-or-2 split
+    assert spread[0, 0] < 1e-2
+    assert any("near twin of 'u1' in its place ('cos(phi) u1'" in n for n in notes)
 
 
 @pytest.mark.slow
