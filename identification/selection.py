@@ -381,13 +381,15 @@ def resolve_collinear(
     notes = {}
     for i, state in enumerate(state_names):
         support = list(np.flatnonzero(xi[i]))
+        # against the fit's own support: swaps each within the F-test of the one before could
+        # add up to a support the data reject (four twins in x', 16 variances)
+        rss, sigma2 = _residual_variance(gram, i, support) if support else (0.0, 0.0)
         for simple, complex_, cosine in pairs:
             if complex_ not in support:
                 continue
             trial = [c for c in support if c != complex_]
             if simple not in trial:
                 trial.append(simple)
-            rss, sigma2 = _residual_variance(gram, i, support)
             rss_new, _ = _rss(a, z[:, i], trial)
             if (rss_new - rss) <= F_CRITICAL * sigma2:
                 support = sorted(trial)
@@ -461,7 +463,11 @@ def grow_significant(
     residual, and every near twin (|cos| > 0.99) of these; no two columns with
     |cos| > 0.999 together. The larger support is taken when it explains more than the
     significance bar of :func:`prune_insignificant` (the Bonferroni bar for the best of p
-    terms, variance scaled by the long-run ratio), and the search repeats from it.
+    terms, variance scaled by the long-run ratio), and the search repeats from it. Else the
+    best support of the same size is taken when the data tell it from the current one
+    (F-test, p = 0.001): the path's twin choices, each within the F-test of the one before,
+    can add up to a support the data reject; :func:`resolve_collinear` then moves back to
+    simpler twins only within the F-test of it.
 
     Returns:
         The coefficients (refitted where changed) and one note per equation grown.
@@ -498,14 +504,19 @@ def grow_significant(
             base = sorted({*support, *top})
             pool = sorted({*base, *np.flatnonzero(near[:, base].any(axis=1) & usable)})
             now = best_subset(g, c, pool, len(support), twin)
+            if now is None:  # more supports than the limit
+                break
+            explained_now = float(b @ b) - _rss(a, b, support)[0]
             bigger = best_subset(g, c, pool, len(support) + 1, twin)
-            if now is None or bigger is None:
-                break
-            explained_now = max(now[0], float(b @ b) - _rss(a, b, support)[0])
-            sigma2 = (total - bigger[0]) / max(float(gram.rows) - len(bigger[1]), 1.0)
-            if bigger[0] - explained_now <= bar * scale * sigma2:
-                break
-            support = list(bigger[1])
+            if bigger is not None:
+                sigma2 = (total - bigger[0]) / max(float(gram.rows) - len(bigger[1]), 1.0)
+                if bigger[0] - max(now[0], explained_now) > bar * scale * sigma2:
+                    support = list(bigger[1])
+                    continue
+            sigma2 = (total - now[0]) / max(float(gram.rows) - len(now[1]), 1.0)
+            if now[0] - explained_now > F_CRITICAL * sigma2:
+                support = list(now[1])
+            break
         if sorted(support) != sorted(start):
             row = np.zeros(xi.shape[1])
             row[support] = _rss(gram.r, b, support)[1]
@@ -515,9 +526,10 @@ def grow_significant(
             removed = [j for j in start if j not in support]
             notes.append(
                 f"{state}': the best support of {len(support)} terms among the near twins of "
-                f"its terms and its best next entries added {name(added)}"
+                f"its terms and its best next entries holds {name(added)}"
                 + (f" in place of {name(removed)}" if removed else "")
-                + f" (each step past the bar of {bar:.3g} residual variances x {scale:.3g})"
+                + f" (a term more must explain {bar:.3g} x {scale:.3g} residual variances; "
+                f"a support of the same size {F_CRITICAL})"
             )
     return xi, notes
 

@@ -687,9 +687,45 @@ def test_growth_replaces_a_wrong_twin_and_adds_the_small_term_a_greedy_stop_miss
     xi, notes = grow_significant(start, Gram.from_rows(theta, y[:, None]), np.ones(1), names, ["s"])
     assert list(np.flatnonzero(xi[0])) == [0, 1, 3]
     np.testing.assert_allclose(xi[0, [0, 1, 3]], [3.0, 1.0, 0.1], rtol=1e-2)
-    assert "added 'b', 'c' in place of 'b cos(phi)'" in notes[0]
+    assert "holds 'b', 'c' in place of 'b cos(phi)'" in notes[0]
     right = np.zeros((1, len(names)))
     right[0, [0, 1]] = [3.0, 1.0]
     y = 3 * a + b + 0.05 * rng.normal(size=4000)
     xi, notes = grow_significant(right, Gram.from_rows(theta, y[:, None]), np.ones(1), names, ["s"])
     assert list(np.flatnonzero(xi[0])) == [0, 1] and notes == []
+
+
+def test_simpler_twins_are_taken_only_while_the_swaps_together_pass_the_f_test():
+    """Each swap to the simpler twin costs 8.6 and 6.6 residual variances alone (under the
+    F-test's 10.83), both together 15.1: one is taken, not both (before, each swap was tested
+    against the support left by the one before, and both were)."""
+    from identification.fit import Gram
+    from identification.selection import resolve_collinear
+
+    rng = np.random.default_rng(1)
+    b1, b2, d1, d2 = rng.normal(size=(4, 4000))
+    c1, c2 = b1 + 0.02 * d1, b2 + 0.02 * d2  # |cos| = 0.9998 to their simple twins
+    theta = np.column_stack([b1, c1, b2, c2])
+    y = 0.095 * c1 + 0.12 * c2 + 0.05 * rng.normal(size=4000)
+    xi = np.zeros((1, 4))
+    xi[0, [1, 3]] = [0.095, 0.12]
+    names = ["u1", "cos(phi) u1", "u2", "cos(phi) u2"]
+    out, notes = resolve_collinear(xi, Gram.from_rows(theta, y[:, None]), names, ["s"], 1)
+    assert list(np.flatnonzero(out[0])) == [0, 3] and len(notes) == 1
+
+
+def test_growth_takes_the_complex_twins_the_data_prefer_together():
+    """Both chosen terms are the simpler twins of the true ones; the best support of the same
+    size (the complex pair) fits 15 residual variances better, past the F-test: taken."""
+    from identification.fit import Gram
+    from identification.selection import grow_significant
+
+    rng = np.random.default_rng(1)
+    b1, b2, d1, d2 = rng.normal(size=(4, 4000))
+    theta = np.column_stack([b1, b1 + 0.02 * d1, b2, b2 + 0.02 * d2])
+    y = 0.095 * theta[:, 1] + 0.12 * theta[:, 3] + 0.05 * rng.normal(size=4000)
+    xi = np.zeros((1, 4))
+    xi[0, [0, 2]] = [0.095, 0.12]
+    names = ["u1", "cos(phi) u1", "u2", "cos(phi) u2"]
+    out, notes = grow_significant(xi, Gram.from_rows(theta, y[:, None]), np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(out[0])) == [1, 3] and "in place of 'u1', 'u2'" in notes[0]
