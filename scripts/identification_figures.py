@@ -277,6 +277,29 @@ def diagnose_6dof(config, sigma=1e-3):
         print(f"  {gain / var:.1f}: {[names[j] for j in support]}")
 
 
+def sweep6_runs(seeds):
+    """The --sweep6 data: (vehicle, params, truth, seed, sigma, clean, noisy) per run."""
+    vehicles = {
+        "m=0.8 kg, J=diag(6,7,12)e-3, RK4, tilt 0.2": (OTHER_6DOF, {}),
+        "m=2.0 kg, J=diag(2,2.4,3.6)e-2, solve_ivp, tilt 0.2": (
+            HEAVY_6DOF, {"integrator": "solve_ivp"}),
+    }  # fmt: skip
+    for name, (params, spec) in vehicles.items():
+        truth = truth_quad6dof(params)
+        for seed in range(seeds):
+            clean = quad6dof_flights(params, FlightSpec(flights=4, seed=seed, **spec))
+            for sigma in (1e-3, 1e-2):
+                yield (
+                    name,
+                    params,
+                    truth,
+                    seed,
+                    sigma,
+                    clean,
+                    add_noise(clean, sigma, seed=100 + seed),
+                )
+
+
 def truth_best_6dof(seeds, window=64):
     """Is the true support the best of its size on the data? (Truth: report only.)
 
@@ -296,41 +319,30 @@ def truth_best_6dof(seeds, window=64):
     print("| vehicle | sigma | seed | equations where another support of the true size fits "
           "better (gap in residual variances) |")  # fmt: skip
     print("|---|---|---|---|")
-    vehicles = {"m=0.8 kg, RK4": (OTHER_6DOF, {}),
-                "m=2.0 kg, solve_ivp": (HEAVY_6DOF, {"integrator": "solve_ivp"})}  # fmt: skip
     counts = {}
-    for name, (params, spec) in vehicles.items():
-        truth = truth_quad6dof(params)
-        for seed in range(seeds):
-            clean = quad6dof_flights(params, FlightSpec(flights=4, seed=seed, **spec))
-            for sigma in (1e-3, 1e-2):
-                noisy = add_noise(clean, sigma, seed=100 + seed)
-                states = list(noisy[0].state_names)
-                variables = [*states, *noisy[0].input_names]
-                names = [term_name(parse_term(t, variables)) for t in quad6dof_library()]
-                true_xi = truth_matrix(truth, states, names)
-                gram = Gram.stack(grams(noisy, names, "rk4", window, true_xi))
-                col, row_scale = _scales(gram, True)
-                a, n = gram.r / col, gram.rows
-                unit = a / np.maximum(np.linalg.norm(a, axis=0), 1e-300)
-                near = np.abs(unit.T @ unit) > 0.99
-                worse = []
-                for i, state in enumerate(states):
-                    b = gram.z[:, i] / row_scale[i]
-                    outside = n - float(b @ b)
-                    true = [int(j) for j in np.flatnonzero(true_xi[i])]
-                    rss_true = _support_rss(a, b, true, outside)
-                    pool = sorted(
-                        {*true, *(int(k) for j in true for k in np.flatnonzero(near[:, j]))}
-                    )
-                    best = min((_support_rss(a, b, list(c), outside), c)
-                               for c in itertools.combinations(pool, len(true)))  # fmt: skip
-                    if set(best[1]) != set(true):
-                        worse.append(
-                            f"{state}' {(best[0] - rss_true) / (rss_true / (n - len(true))):.1f}"
-                        )
-                counts.setdefault(sigma, []).append(len(worse))
-                print(f"| {name} | {sigma:g} | {seed} | {', '.join(worse) or 'none'} |", flush=True)
+    for name, _, truth, seed, sigma, _, noisy in sweep6_runs(seeds):
+        states = list(noisy[0].state_names)
+        variables = [*states, *noisy[0].input_names]
+        names = [term_name(parse_term(t, variables)) for t in quad6dof_library()]
+        true_xi = truth_matrix(truth, states, names)
+        gram = Gram.stack(grams(noisy, names, "rk4", window, true_xi))
+        col, row_scale = _scales(gram, True)
+        a, n = gram.r / col, gram.rows
+        unit = a / np.maximum(np.linalg.norm(a, axis=0), 1e-300)
+        near = np.abs(unit.T @ unit) > 0.99
+        worse = []
+        for i, state in enumerate(states):
+            b = gram.z[:, i] / row_scale[i]
+            outside = n - float(b @ b)
+            true = [int(j) for j in np.flatnonzero(true_xi[i])]
+            rss_true = _support_rss(a, b, true, outside)
+            pool = sorted({*true, *(int(k) for j in true for k in np.flatnonzero(near[:, j]))})
+            best = min((_support_rss(a, b, list(c), outside), c)
+                       for c in itertools.combinations(pool, len(true)))  # fmt: skip
+            if set(best[1]) != set(true):
+                worse.append(f"{state}' {(best[0] - rss_true) / (rss_true / (n - len(true))):.1f}")
+        counts.setdefault(sigma, []).append(len(worse))
+        print(f"| {name} | {sigma:g} | {seed} | {', '.join(worse) or 'none'} |", flush=True)
     for sigma, c in counts.items():
         print(
             f"sigma = {sigma:g}: the truth is the best support in every equation on "
@@ -395,28 +407,18 @@ def sweep6(seeds, config):
     print("| vehicle | sigma | seed | time [s] | choice | terms | off (missed + spurious) | "
           "equations worse than the truth | 1 s sim err / range |")  # fmt: skip
     print("|---|---|---|---|---|---|---|---|---|")
-    vehicles = {
-        "m=0.8 kg, J=diag(6,7,12)e-3, RK4, tilt 0.2": (OTHER_6DOF, {}),
-        "m=2.0 kg, J=diag(2,2.4,3.6)e-2, solve_ivp, tilt 0.2": (
-            HEAVY_6DOF, {"integrator": "solve_ivp"}),
-    }  # fmt: skip
     summary = {}
-    for name, (params, spec) in vehicles.items():
-        truth = truth_quad6dof(params)
-        for seed in range(seeds):
-            clean = quad6dof_flights(params, FlightSpec(flights=4, seed=seed, **spec))
-            for sigma in (1e-3, 1e-2):
-                noisy = add_noise(clean, sigma, seed=100 + seed)
-                t0 = time.perf_counter()
-                model, report = select_model(noisy, quad6dof_library(), config=config)
-                seconds = time.perf_counter() - t0
-                check = check_support(model, truth)
-                sim = sim_error_1s(model, clean)
-                missed = worse(model, truth, noisy, report)
-                summary.setdefault((name, sigma), []).append((sim < 0.05, missed == "none"))
-                print(f"| {name} | {sigma:g} | {seed} | {seconds:.1f} | w={report.best.window} "
-                      f"lam={report.best.lam:.1e} | {check.n_terms} | {check.off} | {missed} | "
-                      f"{sim:.1e} |", flush=True)  # fmt: skip
+    for name, _, truth, seed, sigma, clean, noisy in sweep6_runs(seeds):
+        t0 = time.perf_counter()
+        model, report = select_model(noisy, quad6dof_library(), config=config)
+        seconds = time.perf_counter() - t0
+        check = check_support(model, truth)
+        sim = sim_error_1s(model, clean)
+        missed = worse(model, truth, noisy, report)
+        summary.setdefault((name, sigma), []).append((sim < 0.05, missed == "none"))
+        print(f"| {name} | {sigma:g} | {seed} | {seconds:.1f} | w={report.best.window} "
+              f"lam={report.best.lam:.1e} | {check.n_terms} | {check.off} | {missed} | "
+              f"{sim:.1e} |", flush=True)  # fmt: skip
     for (name, sigma), rows in summary.items():
         print(
             f"{name}, sigma = {sigma:g}: 1 s error < 5 % on {sum(r[0] for r in rows)} of "
