@@ -26,12 +26,17 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
    data) wins; ties go to the lower mean. Sparser models that predict as well as the best,
    within what the folds can resolve, are preferred.
 5. **Final model.** The chosen window and threshold are refitted on all data (full RK4 fixed
-   point). Near-collinear pairs on the data (``1`` / ``cos(phi)``, ``u2`` / ``cos(phi) u2``:
+   point). Where the greedy path stopped short holding a wrong twin, each equation's best
+   support one term larger (or of the same size) within its terms' near twins and best next
+   entries is taken when the data need it (:func:`grow_significant`). Near-collinear pairs
+   on the data (``1`` / ``cos(phi)``, ``u2`` / ``cos(phi) u2``:
    columns with |cosine| > 0.999, one term the other times more factors) are resolved towards
    the simpler term when an F-test on the residuals (p = 0.001, with every row an effective
    sample: under white measurement noise the targets (x_{k+w} - x_k) / (w dt) of neighbouring
-   rows share no sample, so rows / window undercounted them) cannot tell them apart; each
-   case is reported as a warning naming the pair.
+   rows share no sample, so rows / window undercounted them) cannot tell them apart
+   (all swaps of an equation together); each case is reported as a warning naming the pair.
+   Terms whose removal costs less than the Bonferroni bar for the best of p, against the
+   residuals' long-run variance, are dropped (:func:`prune_insignificant`).
 6. **Uncertainty (E-SINDy).** A block bootstrap (whole blocks of rows, drawn with
    replacement) refits the chosen candidate ``n_models`` times; each coefficient's spread and
    inclusion probability go into the model; terms kept in fewer than half of the bags are
@@ -39,7 +44,9 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
    it on the data (|cos| > 0.999) is in at least half (the bags then only disagree on which
    of two columns the data cannot tell apart carries the direction), or its removal alone
    fails the F-test on all data (p = 0.001: one of a cancelling pair such as gravity and
-   thrust, spread by the bags over many near twins).
+   thrust, spread by the bags over many near twins). A bag takes the grown support where
+   its own rows pass the same bar; a kept term's spread is over its near twin's direction in
+   bags that hold the twin.
 
 Scores, the rule and the warnings go into ``model.meta["selection"]`` (JSON-safe).
 """
@@ -521,17 +528,20 @@ def grow_significant(
             row = np.zeros(xi.shape[1])
             row[support] = _rss(gram.r, b, support)[1]
             xi[i] = row
-            name = lambda js: ", ".join(repr(term_name(parse_term(feature_names[j]))) for j in js)  # noqa: E731
             added = [j for j in support if j not in start]
             removed = [j for j in start if j not in support]
             notes.append(
                 f"{state}': the best support of {len(support)} terms among the near twins of "
-                f"its terms and its best next entries holds {name(added)}"
-                + (f" in place of {name(removed)}" if removed else "")
+                f"its terms and its best next entries holds {_term_list(feature_names, added)}"
+                + (f" in place of {_term_list(feature_names, removed)}" if removed else "")
                 + f" (a term more must explain {bar:.3g} x {scale:.3g} residual variances; "
                 f"a support of the same size {F_CRITICAL})"
             )
     return xi, notes
+
+
+def _term_list(feature_names: Sequence[str], columns: Sequence[int]) -> str:
+    return ", ".join(repr(term_name(parse_term(feature_names[j]))) for j in columns)
 
 
 def prune_insignificant(
@@ -745,8 +755,10 @@ def select_model(
         f"score = RMS of the {horizon}-step open-loop prediction error normalised by each "
         "state's standard deviation; chosen: the fewest terms within one standard error of "
         f"the best mean score plus the scores' own integrator error ({resolution:.2g}); "
-        "refitted on all data with the backward-elimination check; terms that do not pass "
-        "the Bonferroni bar against the residuals' long-run variance dropped"
+        "refitted on all data with the backward-elimination check; each equation grown to its "
+        "best support one term larger among its terms' near twins and best next entries where "
+        "that passes the Bonferroni bar; terms that do not pass the bar against the "
+        "residuals' long-run variance dropped"
     )
     report = SelectionReport(candidates, chosen, k, horizon, rule)
 
