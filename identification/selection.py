@@ -598,21 +598,25 @@ def indistinguishable_twins(
     feature_names: Sequence[str],
     state_names: Sequence[str],
     window: int,
-) -> dict[tuple[int, int, int], str]:
-    """Warnings for chosen terms whose near-collinear twin fits the data as well.
+) -> tuple[list[str], set[tuple[int, int, int]]]:
+    """Warnings for chosen terms whose near-collinear twins fit the data as well.
 
     For each chosen term with a near-collinear twin (see :func:`collinear_pairs`) outside the
     model, the twin is put in its place; when the residual changes by no more than the F-test
     resolves (p = 0.001, every row an effective sample), the data cannot tell the two
-    apart, and the warning names the pair and the term kept (the simpler, by construction).
-    Keyed by (equation, simple column, complex column).
+    apart. One warning per chosen term names it and all such twins with their residual
+    changes (the kept term is the simpler, by construction).
+
+    Returns:
+        The warnings, and the pairs they cover as (equation, simple column, complex column).
     """
     pairs = collinear_pairs(gram, feature_names)
     if not pairs:
-        return {}
+        return [], set()
     a, z = gram.r, gram.z
-    notes = {}
-    for i, state in enumerate(state_names):
+    groups: dict[tuple[int, int], list[tuple[int, float, float]]] = {}
+    covered = set()
+    for i in range(len(state_names)):
         support = list(np.flatnonzero(xi[i]))
         if not support:
             continue
@@ -624,15 +628,20 @@ def indistinguishable_twins(
                 trial = [other if c == kept else c for c in support]
                 change = _rss(a, z[:, i], trial)[0] - rss
                 if change <= F_CRITICAL * sigma2:
-                    notes[i, simple, complex_] = (
-                        f"{state}': {term_name(parse_term(feature_names[simple]))!r} and "
-                        f"{term_name(parse_term(feature_names[complex_]))!r} are nearly "
-                        f"collinear on this data (|cos| = {cosine:.6f}) and fit it equally "
-                        f"well (residual change {change / max(sigma2, 1e-300):.2g} variances, "
-                        f"F-test needs {F_CRITICAL}): kept "
-                        f"{term_name(parse_term(feature_names[kept]))!r}"
+                    groups.setdefault((i, kept), []).append(
+                        (other, change / max(sigma2, 1e-300), cosine)
                     )
-    return notes
+                    covered.add((i, simple, complex_))  # fmt: skip
+    notes = []
+    for (i, kept), others in groups.items():
+        listed = ", ".join(f"{_term_list(feature_names, [o])} ({c:.2g})" for o, c, _ in others)
+        notes.append(
+            f"{state_names[i]}': kept {_term_list(feature_names, [kept])}; its nearly collinear "
+            f"twin{'s' if len(others) > 1 else ''} on this data fit it equally well: {listed} "
+            f"(residual change in variances with the twin in its place; |cos| >= "
+            f"{min(c for *_, c in others):.6f}; the F-test needs {F_CRITICAL})"
+        )
+    return notes, covered
 
 
 # -- the entry point --------------------------------------------------------------------
@@ -774,8 +783,9 @@ def select_model(
     xi, resolved = resolve_collinear(xi, final_gram, names, first.state_names, best.window)
     xi, notes = prune_insignificant(xi, final_gram, ratio, names, first.state_names)
     report.warnings += notes
-    twins = indistinguishable_twins(xi, final_gram, names, first.state_names, best.window)
-    report.warnings += list({**resolved, **twins}.values())  # one warning per pair
+    twins, covered = indistinguishable_twins(xi, final_gram, names, first.state_names,
+                                             best.window)  # fmt: skip
+    report.warnings += [note for key, note in resolved.items() if key not in covered] + twins
     std = prob = None
     if n_models > 0:
         xi, std, prob, dropped = _bootstrap(trajs, names, final_cfg, xi, n_models, seed,

@@ -729,3 +729,20 @@ def test_growth_takes_the_complex_twins_the_data_prefer_together():
     names = ["u1", "cos(phi) u1", "u2", "cos(phi) u2"]
     out, notes = grow_significant(xi, Gram.from_rows(theta, y[:, None]), np.ones(1), names, ["s"])
     assert list(np.flatnonzero(out[0])) == [1, 3] and "in place of 'u1', 'u2'" in notes[0]
+
+
+def test_one_warning_names_every_twin_the_data_cannot_tell_from_a_kept_term():
+    from identification.fit import Gram
+    from identification.selection import indistinguishable_twins
+
+    rng = np.random.default_rng(4)
+    a, b, d1, d2 = rng.normal(size=(4, 4000))
+    theta = np.column_stack([a, b, b + 1e-3 * d1, b + 1e-3 * d2])
+    names = ["a", "b", "cos(phi) b", "sin(phi) b"]
+    y = 2 * a + b + 0.05 * rng.normal(size=4000)
+    xi = np.array([[2.0, 1.0, 0.0, 0.0]])
+    notes, covered = indistinguishable_twins(xi, Gram.from_rows(theta, y[:, None]), names,
+                                             ["s"], 1)  # fmt: skip
+    assert len(notes) == 1 and covered == {(0, 1, 2), (0, 1, 3)}
+    assert notes[0].startswith("s': kept 'b'; its nearly collinear twins")
+    assert "'b cos(phi)' (" in notes[0] and "'b sin(phi)' (" in notes[0]
