@@ -354,6 +354,13 @@ def _rss(a: np.ndarray, b: np.ndarray, cols: list[int]) -> tuple[float, np.ndarr
     return float(resid @ resid), coef
 
 
+def _refit(gram: Gram, i: int, support: Sequence[int]) -> np.ndarray:
+    """Equation ``i``'s coefficient row: least squares on ``support``, zero elsewhere."""
+    row = np.zeros(gram.p)
+    row[list(support)] = _rss(gram.r, gram.z[:, i], list(support))[1]
+    return row
+
+
 def _residual_variance(gram: Gram, i: int, support: Sequence[int]) -> tuple[float, float]:
     """RSS of equation ``i`` on ``support``, and its residual variance for the F-tests.
 
@@ -408,10 +415,7 @@ def resolve_collinear(
                     "simpler term"
                 )
         if sorted(support) != list(np.flatnonzero(xi[i])):
-            row = np.zeros(xi.shape[1])
-            if support:
-                row[support] = _rss(a, z[:, i], support)[1]
-            xi[i] = row
+            xi[i] = _refit(gram, i, support)
     return xi, notes
 
 
@@ -525,9 +529,7 @@ def grow_significant(
                 support = list(now[1])
             break
         if sorted(support) != sorted(start):
-            row = np.zeros(xi.shape[1])
-            row[support] = _rss(gram.r, b, support)[1]
-            xi[i] = row
+            xi[i] = _refit(gram, i, support)
             added = [j for j in support if j not in start]
             removed = [j for j in start if j not in support]
             notes.append(
@@ -581,9 +583,7 @@ def prune_insignificant(
                            f"({costs[k]:.3g})")  # fmt: skip
             support.pop(k)
         if dropped:
-            row = np.zeros(xi.shape[1])
-            row[support] = _rss(gram.r, gram.z[:, i], support)[1]
-            xi[i] = row
+            xi[i] = _refit(gram, i, support)
             notes.append(
                 f"{state}': dropped {', '.join(dropped)}: removing each costs less than "
                 f"{bar:.3g} residual variances (the bar for the best of {gram.p} terms; "
@@ -789,7 +789,7 @@ def select_model(
     std = prob = None
     if n_models > 0:
         xi, std, prob, dropped = _bootstrap(trajs, names, final_cfg, xi, n_models, seed,
-                                            (grown, ratio))  # fmt: skip
+                                            grown, ratio)  # fmt: skip
         report.warnings += dropped
     tally = TALLY.summary()
     if tally:
@@ -827,14 +827,16 @@ def _bootstrap(
     xi: np.ndarray,
     n_models: int,
     seed: int,
-    grown: tuple[dict[int, list[int]], np.ndarray] = ({}, np.ones(0)),
+    grown: dict[int, list[int]] | None = None,
+    ratio: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """Block bootstrap of the chosen fit: spread, inclusion probability, E-SINDy thresholding.
 
-    ``grown``: the supports :func:`grow_significant` chose ({equation: columns}) and the
-    long-run ratios. A bag takes such a support in place of its own path's where its own
-    rows pass the same bar (each added term past the Bonferroni bar, or a better fit at no
-    more terms), so the inclusion probabilities describe the procedure that made the model.
+    ``grown``: the supports :func:`grow_significant` chose ({equation: columns}), with
+    ``ratio`` the long-run ratios. A bag takes such a support in place of its own path's
+    where its own rows pass the same bar (each added term past the Bonferroni bar, or a
+    better fit at no more terms), so the inclusion probabilities describe the procedure that
+    made the model.
     """
     w = config.window
     n_blocks = 40 if len(names) < 100 else 12
@@ -849,20 +851,19 @@ def _bootstrap(
     block_grams = grams(blocks, names, "rk4", w, xi)
     rng = np.random.default_rng(seed)
     bags = []
-    supports, ratio = grown
     bar = _significance_bar(len(names))
     for _ in range(n_models):
         weights = rng.multinomial(len(blocks), np.full(len(blocks), 1.0 / len(blocks)))
         bag_gram = Gram.stack(block_grams, list(weights.astype(float)))
         bag = solve(bag_gram, config, names)
-        for i, support in supports.items():
+        for i, support in (grown or {}).items():
             own = list(np.flatnonzero(bag[i]))
             rss_own = _rss(bag_gram.r, bag_gram.z[:, i], own)[0]
             rss_new, sigma2 = _residual_variance(bag_gram, i, support)
             extra = max(len(support) - len(own), 0)
-            if rss_own - rss_new > bar * max(float(ratio[i]), 1.0) * sigma2 * extra:
-                bag[i] = 0.0
-                bag[i, support] = _rss(bag_gram.r, bag_gram.z[:, i], support)[1]
+            scale = 1.0 if ratio is None else max(float(ratio[i]), 1.0)
+            if rss_own - rss_new > bar * scale * sigma2 * extra:
+                bag[i] = _refit(bag_gram, i, support)
         bags.append(bag)
     bags_a = np.array(bags)
     prob = np.mean(bags_a != 0, axis=0)
@@ -896,14 +897,9 @@ def _bootstrap(
                     weak[i, j] = False
     xi_in = xi
     if weak.any():
-        a, z = full.r, full.z
         xi = xi.copy()
         for i in np.unique(np.nonzero(weak)[0]):
-            cols = [c for c in np.flatnonzero(xi[i]) if not weak[i, c]]
-            row = np.zeros(xi.shape[1])
-            if cols:
-                row[cols] = np.linalg.lstsq(a[:, cols], z[:, i], rcond=None)[0]
-            xi[i] = row
+            xi[i] = _refit(full, i, [c for c in np.flatnonzero(xi[i]) if not weak[i, c]])
         states = trajs[0].state_names
         for i, j in zip(*np.nonzero(weak), strict=True):
             notes.append(
