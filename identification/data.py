@@ -56,6 +56,11 @@ class Trajectory:
         input_names: Names of the m inputs.
         refs: Optional reference at each sample (for closed-loop replays), shape (N, r).
         meta: Free-form provenance (case, seed, policy, ...).
+        missing: Optional mask of rows whose states were not observed (a logger re-sent an
+            old sample, or a glitch), shape (N,): their time and input are the log's, their
+            states a placeholder (interpolated). The RK4 formulation predicts them with the
+            model being fitted (exact, as for observed rows), no fit targets or score compare
+            them, and no prediction starts from them.
     """
 
     t: np.ndarray
@@ -65,13 +70,29 @@ class Trajectory:
     input_names: tuple[str, ...]
     refs: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    missing: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.t = np.asarray(self.t, dtype=np.float64)
         self.x = np.atleast_2d(np.asarray(self.x, dtype=np.float64))
         self.u = np.atleast_2d(np.asarray(self.u, dtype=np.float64))
         self.state_names, self.input_names = tuple(self.state_names), tuple(self.input_names)
+        if self.missing is not None:
+            self.missing = np.asarray(self.missing, dtype=bool)
+            if self.missing.shape != self.t.shape:
+                raise ValueError(
+                    f"missing has shape {self.missing.shape}, expected ({self.t.size},)"
+                )
+            if not self.missing.any():
+                self.missing = None
         validate(self)
+
+    @property
+    def observed(self) -> np.ndarray:
+        """Mask of rows whose states were observed, shape (N,)."""
+        if self.missing is None:
+            return np.ones(self.t.size, dtype=bool)
+        return ~self.missing
 
     @property
     def dt(self) -> float:
@@ -95,9 +116,10 @@ class Trajectory:
     def slice(self, start: int, stop: int) -> Trajectory:
         """Rows [start, stop) as a new trajectory (same names, meta copied)."""
         refs = None if self.refs is None else self.refs[start:stop]
+        missing = None if self.missing is None else self.missing[start:stop]
         return Trajectory(
             self.t[start:stop], self.x[start:stop], self.u[start:stop], self.state_names,
-            self.input_names, refs, dict(self.meta),
+            self.input_names, refs, dict(self.meta), missing,
         )  # fmt: skip
 
     @classmethod
@@ -152,6 +174,7 @@ class CleanReport:
         nonfinite_rows: Rows dropped because a value is NaN or infinite.
         outlier_rows: Rows dropped as outliers (robust z-score of the state).
         gaps: Time gaps (step > ``gap_factor`` x median step) where the log was split.
+        bridged: Rows of the above kept as missing (time and input used, states predicted).
         short_segments: Segments dropped as too short.
         segments: Number of segments returned.
         rows_out: Rows returned.
@@ -163,6 +186,7 @@ class CleanReport:
     nonfinite_rows: int = 0
     outlier_rows: int = 0
     gaps: int = 0
+    bridged: int = 0
     short_segments: int = 0
     segments: int = 0
     rows_out: int = 0
@@ -181,8 +205,14 @@ class CleanReport:
         return (
             f"{self.rows_in} rows -> {self.rows_out} rows in {self.segments} segment(s); "
             f"dropped {self.stale_rows} stale/repeated, {self.nonfinite_rows} non-finite, "
-            f"{self.outlier_rows} outlier rows, "
-            f"{self.short_segments} short segment(s); split at {self.gaps} gap(s); "
+            f"{self.outlier_rows} outlier rows"
+            + (
+                f" (of these, {self.bridged} bridged instead: time and input kept, states "
+                "predicted by the model)"
+                if self.bridged
+                else ""
+            )
+            + f", {self.short_segments} short segment(s); split at {self.gaps} gap(s); "
             f"time-step jitter {100 * self.jitter:.1f} % (each row's own step is used)"
         )
 
@@ -196,8 +226,9 @@ def clean(
     gap_factor: float = 3.0,
     outlier_z: float = 50.0,
     min_rows: int = 20,
+    bridge: int = 2,
 ) -> tuple[list[Trajectory], CleanReport]:
-    """Splits a raw log into clean segments: stale rows, outliers and gaps removed.
+    """Splits a raw log into clean segments: stale rows, outliers and gaps handled.
 
     A row is *stale* when its time does not advance, or when its states repeat the previous
     row's exactly after the vehicle moved into that row: a logger that re-sent an old sample
@@ -206,10 +237,16 @@ def clean(
     log's first row) are kept: an exact equilibrium. A row is an *outlier* when a state is
     further than ``outlier_z`` robust standard deviations (1.4826 MAD over the log, at least
     1 % of the state's standard deviation) from the straight line through its two
-    neighbours. Dropped rows and time gaps longer than
-    ``gap_factor`` median steps split the log, because the input held over a missing step is
-    unknown; segments shorter than ``min_rows`` are dropped. Jittery steps are kept: the fit
-    uses each row's own step.
+    neighbours.
+
+    A row whose states are stale, outlying or not finite, but whose time and input are good,
+    keeps its time and input and is marked *missing* (:attr:`Trajectory.missing`) when it sits
+    in a run of at most ``bridge`` such rows: the RK4 formulation predicts its states with the
+    model being fitted, so the input over each step is still the logged one and the fit stays
+    exact. (A log that re-sends a twentieth of its rows would otherwise fall apart into
+    fragments too short to fit.) Longer runs, rows whose time or input is bad, and time gaps
+    longer than ``gap_factor`` median steps split the log; segments shorter than ``min_rows``
+    are dropped. Jittery steps are kept: the fit uses each row's own step.
 
     Args:
         t: Raw time stamps, shape (N,) (repeats and steps back are dropped as stale).
@@ -220,16 +257,16 @@ def clean(
         gap_factor: Steps longer than this many median steps are gaps.
         outlier_z: Robust z-score above which a row is an outlier.
         min_rows: Shortest segment kept.
+        bridge: Longest run of rows with bad states kept as missing (0: drop them all).
 
     Returns:
         The clean segments and the report.
     """
     t, x, u = (np.asarray(a, dtype=np.float64) for a in (t, x, u))
     x, u = x.reshape(t.size, -1), u.reshape(t.size, -1)
-    finite = np.isfinite(t) & np.isfinite(x).all(axis=1) & np.isfinite(u).all(axis=1)
+    finite_x = np.isfinite(x).all(axis=1)
+    finite = np.isfinite(t) & finite_x & np.isfinite(u).all(axis=1)
     report = CleanReport(rows_in=t.size)
-    keep = np.ones(t.size, dtype=bool)
-    stale = np.zeros(t.size, dtype=bool)
     same = np.zeros(t.size, dtype=bool)
     same[1:] = np.all(x[1:] == x[:-1], axis=1)  # row k repeats row k-1
     # A run of repeats of row k-1 is a logger re-sending it when the vehicle moved into row
@@ -244,12 +281,17 @@ def clean(
     if starts.size:
         run_of = np.maximum(np.cumsum(run_start) - 1, 0)  # each row's latest run
         resent = same & moved[starts - 1][run_of]
-    stale[1:] = (np.diff(t) <= 0) | resent[1:]
-    stale[1:] |= t[1:] <= np.maximum.accumulate(t)[:-1]  # any step back in time
-    keep &= ~stale & finite
+    # rows whose time or input is unusable are dropped; rows with bad states only may be bridged
+    good_tu = np.isfinite(t) & np.isfinite(u).all(axis=1)
+    late = np.zeros(t.size, dtype=bool)
+    t_run = np.where(np.isfinite(t), t, -np.inf)
+    late[1:] = t_run[1:] <= np.maximum.accumulate(t_run)[:-1]  # repeats and steps back
+    stale = resent | late
     report.stale_rows = int((stale & finite).sum())
     report.nonfinite_rows = int((~finite).sum())
-    idx = np.flatnonzero(keep)
+    dropped = ~good_tu | late
+    bad_x = (resent | ~finite_x) & ~dropped
+    idx = np.flatnonzero(~dropped & ~bad_x)
     outliers = np.zeros(t.size, dtype=bool)
     if idx.size >= 5:
         xs, ts = x[idx], t[idx]
@@ -268,24 +310,41 @@ def clean(
         z = np.max(np.abs(resid) / mad, axis=1)
         peak = bad & (z >= np.concatenate([[0], z[:-1]])) & (z >= np.concatenate([z[1:], [0]]))
         outliers[idx[1:-1][peak]] = True
-    keep &= ~outliers
     report.outlier_rows = int(outliers.sum())
-    # split wherever a row was dropped or the step is a gap
-    rows = np.flatnonzero(keep)
+    bad_x |= outliers
+    # runs of bad states longer than ``bridge`` are dropped like bad times
+    rows = np.flatnonzero(~dropped)
     if rows.size == 0:
         raise ValueError("no rows left after dropping stale rows and outliers")
+    flagged = bad_x[rows]
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], flagged.astype(int), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if b - a > bridge or np.any(np.diff(rows[a:b]) > 1):
+            dropped[rows[a:b]] = True
+    rows = np.flatnonzero(~dropped)
+    if rows.size == 0:
+        raise ValueError("no rows left after dropping stale rows and outliers")
+    # split wherever a row was dropped or the step is a gap
     steps = np.diff(t[rows])
     median = float(np.median(steps)) if steps.size else 0.0
     gap = steps > gap_factor * median
-    dropped_between = np.diff(rows) > 1
     report.gaps = int(gap.sum())
-    cuts = np.flatnonzero(gap | dropped_between) + 1
+    cuts = np.flatnonzero(gap | (np.diff(rows) > 1)) + 1
     segments = []
     for part in np.split(rows, cuts):
+        observed = np.flatnonzero(~bad_x[part])
+        part = part[observed[0] : observed[-1] + 1] if observed.size else part[:0]
         if part.size < max(min_rows, 3):
             report.short_segments += 1
             continue
-        seg = Trajectory(t[part], x[part], u[part], state_names, input_names)
+        missing = bad_x[part]
+        xp = x[part].copy()
+        if missing.any():  # placeholder states: linear in time between the observed rows
+            tp = t[part]
+            for j in range(xp.shape[1]):
+                xp[missing, j] = np.interp(tp[missing], tp[~missing], xp[~missing, j])
+            report.bridged += int(missing.sum())
+        seg = Trajectory(t[part], xp, u[part], state_names, input_names, missing=missing)
         segments.append(seg)
         dev = np.abs(seg.steps / median - 1.0).max() if median else 0.0
         report.jitter = max(report.jitter, float(dev))

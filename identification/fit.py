@@ -250,6 +250,40 @@ def _rk4_stage_theta(
     return (theta(x, u) + 2 * theta(s2, u) + 2 * theta(s3, u) + theta(s4, u)) / 6.0
 
 
+def predict_missing(tr: Trajectory, rhs: Callable) -> np.ndarray:
+    """The states of ``tr`` with its missing rows predicted by RK4 steps of ``rhs``.
+
+    Each missing row is one RK4 step (the logged input held, its own step) from the row
+    before it, so a run of missing rows is predicted from the last observed one. With the
+    true coefficients this reproduces data made by RK4 exactly: the fit's fixed point is
+    unchanged by the rows the logger lost.
+    """
+    if tr.missing is None:
+        return tr.x
+    x, miss = tr.x.copy(), tr.missing
+    # position of each missing row in its run (1 for the first): predicted in that order
+    run = np.zeros(miss.size, dtype=int)
+    for k in np.flatnonzero(miss):
+        run[k] = run[k - 1] + 1 if k > 0 else 1
+    h = np.diff(tr.t)
+    for depth in range(1, int(run.max()) + 1):
+        k = np.flatnonzero((run == depth) & (np.arange(miss.size) > 0))
+        x0, u0, hk = x[k - 1], tr.u[k - 1], h[k - 1][:, None]
+        k1 = rhs(x0, u0)
+        k2 = rhs(x0 + 0.5 * hk * k1, u0)
+        k3 = rhs(x0 + 0.5 * hk * k2, u0)
+        k4 = rhs(x0 + hk * k3, u0)
+        x[k] = x0 + hk / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
+    return x
+
+
+def _observed_rows(
+    keep: np.ndarray, theta: np.ndarray, y: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rows whose targets come from observed states (all of them on a complete log)."""
+    return (theta, y) if keep.all() else (theta[keep], y[keep])
+
+
 def _differentiator(derivative: str | BaseDifferentiation) -> BaseDifferentiation:
     if isinstance(derivative, BaseDifferentiation):
         return derivative
@@ -286,26 +320,30 @@ def iter_rows(
         raise ValueError("the rk4 formulation needs current coefficients (xi)")
     step = chunk_rows or max(500, CHUNK_ELEMENTS // max(len(feature_names), 1))
     for index, tr in enumerate(trajs):
+        seen = tr.observed  # rows with observed states: the only fit targets
         if not isinstance(derivative, str) or derivative in ("central", "smoothed"):
             dx = np.asarray(_differentiator(derivative)(tr.x, tr.t))
             for s in range(0, len(tr), step):
-                yield index, theta(tr.x[s : s + step], tr.u[s : s + step]), dx[s : s + step]
+                rows = theta(tr.x[s : s + step], tr.u[s : s + step])
+                yield index, *_observed_rows(seen[s : s + step], rows, dx[s : s + step])
             continue
         if len(tr) <= window:
             raise ValueError(f"a trajectory of {len(tr)} samples is too short for window {window}")
         n_rows = len(tr) - window
+        xs = predict_missing(tr, rhs) if rhs is not None else tr.x
         for s in range(0, n_rows, step):
             stop = min(s + step, n_rows)  # window rows s..stop-1 use samples s..stop-1+window
-            x, u = tr.x[s : stop + window - 1], tr.u[s : stop + window - 1]
+            x, u = xs[s : stop + window - 1], tr.u[s : stop + window - 1]
             h = np.diff(tr.t[s : stop + window])
             if derivative == "forward":
                 rows = theta(x, u)
             else:
                 rows = _rk4_stage_theta(theta, rhs, x, u, h)
-            y = (tr.x[s + window : stop + window] - tr.x[s:stop]) / (
+            y = (xs[s + window : stop + window] - xs[s:stop]) / (
                 tr.t[s + window : stop + window] - tr.t[s:stop]
             )[:, None]
-            yield index, _window_mean(rows, h, window), y
+            keep = seen[s:stop] & seen[s + window : stop + window]
+            yield index, *_observed_rows(keep, _window_mean(rows, h, window), y)
 
 
 def regression_rows(

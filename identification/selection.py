@@ -18,8 +18,10 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
    is kept. pysindy optimizers (``stlsq``, ``sr3``, ``ensemble`` or an object) still work.
 3. **Score.** Multi-step open-loop prediction on the held-out data: from start points spread
    over each held-out trajectory, the candidate is integrated by RK4 with the *recorded*
-   inputs for ``horizon`` steps; the error of every state, divided by that state's standard
-   deviation over the data, is averaged over states, steps and starts (root mean square).
+   inputs for ``horizon`` steps (rows a logger lost are predicted through, not compared);
+   the error of every state, divided by that state's standard deviation over the data, is
+   averaged over states, steps and starts (root mean square). The windows and the horizon
+   are sized to the segments that hold most of the data (:func:`typical_length`).
    A prediction that leaves finite numbers or grows past 1e3 state deviations scores inf.
 4. **Rule: one standard error.** Among candidates whose mean fold score is within one
    standard error (over folds) of the best mean, the one with the fewest terms (fitted on all
@@ -84,7 +86,8 @@ SELECT_LAMBDAS: tuple[float, ...] = tuple(float(v) for v in np.logspace(-6, 0, 1
 
 WINDOWS: tuple[int, ...] = (1, 4, 16, 64)
 """Integral windows tried by default (1: clean data; longer: noise; a window of a quarter of the
-shortest trajectory or more is skipped). 64 lets the validation average sigma = 1e-2 noise.."""
+data's typical segment (:func:`typical_length`) or more is skipped). 64 lets the validation
+average sigma = 1e-2 noise."""
 
 BAG_T = 2.0
 """A kept term's coefficient must exceed this many standard deviations of its bootstrap fits,
@@ -218,11 +221,35 @@ def make_units(trajs: Sequence[Trajectory], folds: int, min_rows: int) -> list[T
     return units
 
 
+def typical_length(trajs: Sequence[Trajectory], share: float = 0.9) -> int:
+    """The longest length L such that segments of at least L rows hold ``share`` of the rows.
+
+    A real log split at its gaps leaves a few long segments and many short fragments; the
+    shortest fragment must not cap the window and the horizon of all the data (20 rows would
+    allow windows up to 4 and a 10-step horizon on an hour of flight). Windows are sized to the
+    segments that hold most of the data; shorter segments sit out the windows they cannot hold.
+    """
+    lengths = np.sort([len(t) for t in trajs])[::-1]
+    covered = np.cumsum(lengths) / lengths.sum()
+    return int(lengths[int(np.searchsorted(covered, share - 1e-12))])
+
+
+def long_enough(trajs: Sequence[Trajectory], window: int) -> list[Trajectory]:
+    """The trajectories that hold at least one row of the integral form with ``window``."""
+    return [t for t in trajs if len(t) > window]
+
+
 def _rollouts(rhs: Any, tr: Trajectory, horizon: int, max_starts: int, substeps: int = 1) -> Any:
-    """Yields (predicted, recorded) states of ``tr`` step by step from evenly spread starts."""
+    """Yields (predicted, recorded, observed) step by step from evenly spread starts.
+
+    Starts are observed rows; ``observed`` marks the predictions that have a recorded state
+    to compare with (not a row the logger lost: :attr:`Trajectory.missing`).
+    """
     h_len = min(horizon, len(tr) - 1)
-    n_starts = len(tr) - h_len
-    starts = np.unique(np.linspace(0, n_starts - 1, min(max_starts, n_starts)).astype(int))
+    seen = tr.observed
+    candidates = np.flatnonzero(seen[: len(tr) - h_len])
+    pick = np.linspace(0, candidates.size - 1, min(max_starts, candidates.size)).astype(int)
+    starts = candidates[np.unique(pick)]
     x = tr.x[starts]
     steps = np.diff(tr.t)
     for j in range(h_len):
@@ -234,7 +261,7 @@ def _rollouts(rhs: Any, tr: Trajectory, horizon: int, max_starts: int, substeps:
             k3 = rhs(x + 0.5 * h * k2, u)
             k4 = rhs(x + h * k3, u)
             x = x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
-        yield x, tr.x[starts + j + 1]
+        yield x, tr.x[starts + j + 1], seen[starts + j + 1]
 
 
 def prediction_score(
@@ -259,8 +286,8 @@ def prediction_score(
     total, count = 0.0, 0
     with np.errstate(all="ignore"):
         for tr in held_out:
-            for x, recorded in _rollouts(rhs, tr, horizon, max_starts):
-                err = (x - recorded) / scale
+            for x, recorded, seen in _rollouts(rhs, tr, horizon, max_starts):
+                err = (x[seen] - recorded[seen]) / scale
                 sq = float(np.sum(err**2))
                 if not np.isfinite(sq) or sq > 1e6 * err.size:
                     return float("inf")
@@ -287,8 +314,8 @@ def integrator_resolution(
         for tr in held_out:
             coarse = _rollouts(rhs, tr, horizon, max_starts)
             fine = _rollouts(rhs, tr, horizon, max_starts, substeps=2)
-            for (one, _), (two, _) in zip(coarse, fine, strict=True):
-                err = (one - two) / scale
+            for (one, _, seen), (two, _, _) in zip(coarse, fine, strict=True):
+                err = (one[seen] - two[seen]) / scale
                 total += float(np.sum(err**2))
                 count += err.size
     value = float(np.sqrt(total / max(count, 1)))
@@ -313,6 +340,11 @@ def best_candidate(candidates: Sequence[Candidate]) -> int:
 def choose_one_se(candidates: Sequence[Candidate], resolution: float = 0.0) -> int:
     """Index of the sparsest candidate within one standard error of the best mean score.
 
+    The empty model (every derivative zero: the state held) must also be within one standard
+    error of the best in the paired sense, fold by fold: on real logs the folds differ so much
+    in difficulty that the standard error of a mean swallowed a gain the best model made on
+    every fold (two Crazyflie flights: `z' = vz` lost to `z' = 0`).
+
     Args:
         candidates: The scored candidates.
         resolution: The scores' own numerical error (:func:`integrator_resolution`), added
@@ -321,7 +353,19 @@ def choose_one_se(candidates: Sequence[Candidate], resolution: float = 0.0) -> i
     best = best_candidate(candidates)
     limit = candidates[best].mean + candidates[best].se + resolution
     ok = [i for i, c in enumerate(candidates) if c.mean <= limit * (1 + 1e-12)]
+    ok = [
+        i
+        for i in ok
+        if candidates[i].n_terms > 0 or _paired_within(candidates[i], candidates[best], resolution)
+    ]
     return min(ok, key=lambda i: (candidates[i].n_terms, candidates[i].mean))
+
+
+def _paired_within(c: Candidate, best: Candidate, resolution: float) -> bool:
+    """Whether ``c`` trails ``best`` by at most one standard error of their fold differences."""
+    d = np.asarray(c.fold_scores) - np.asarray(best.fold_scores)
+    se = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else 0.0
+    return float(d.mean()) <= (se + resolution) * (1 + 1e-12) + 1e-12 * best.mean
 
 
 # -- near-collinear pairs ---------------------------------------------------------------
@@ -697,9 +741,9 @@ def select_model(
     base = config or FitConfig(optimizer="stepwise")
     TALLY.counts.clear()
     check_identifiable(Gram.stack(grams(trajs, names, "forward", 1)), names, trajs)
-    shortest = min(len(t) for t in trajs)
-    windows = sorted({int(w) for w in windows if 0 < w < max(shortest // 4, 2)}) or [1]
-    horizon = int(max(1, min(horizon, shortest // 2)))
+    typical = typical_length(trajs)
+    windows = sorted({int(w) for w in windows if 0 < w < max(typical // 4, 2)}) or [1]
+    horizon = int(max(1, min(horizon, typical // 2)))
     units = make_units(trajs, folds, min_rows=max(2 * horizon, 4 * max(windows), 20))
     k = min(folds, len(units))
     fold_of = np.arange(len(units)) % k
@@ -724,10 +768,11 @@ def select_model(
     for w in windows:
         pilot_cfg = dataclasses.replace(base, lam=pilot_lam, window=w, iterations=2,
                                         full_path=True)  # fmt: skip
-        pilot = fit_coefficients(units, names, pilot_cfg, pilot)
+        pilot = fit_coefficients(long_enough(units, w), names, pilot_cfg, pilot)
         pilots[w] = pilot
-        unit_grams = grams(units, names, base.derivative if base.derivative != "rk4" else "rk4",
-                           w, pilot)  # fmt: skip
+        fitted = iter(grams(long_enough(units, w), names, base.derivative, w, pilot))
+        unit_grams = [next(fitted) if len(u) > w else Gram.zeros(len(names), len(first.state_names))
+                      for u in units]  # fmt: skip
         # candidates are the forward paths; the chosen one is refitted with the backward check
         grid_cfg = dataclasses.replace(base, window=w, backward=False)
         scores = np.full((len(lambdas), k), np.inf)
@@ -772,9 +817,10 @@ def select_model(
     report = SelectionReport(candidates, chosen, k, horizon, rule)
 
     final_cfg = dataclasses.replace(base, lam=best.lam, window=best.window)
-    xi = fit_coefficients(trajs, names, final_cfg, pilots[best.window])
-    final_gram = Gram.stack(grams(trajs, names, "rk4", best.window, xi))
-    ratio = long_run_ratio(trajs, names, xi, best.window)
+    used = long_enough(trajs, best.window)  # the segments this window's rows come from
+    xi = fit_coefficients(used, names, final_cfg, pilots[best.window])
+    final_gram = Gram.stack(grams(used, names, "rk4", best.window, xi))
+    ratio = long_run_ratio(used, names, xi, best.window)
     path_xi = xi
     xi, notes = grow_significant(xi, final_gram, ratio, names, first.state_names)
     report.warnings += notes
@@ -788,7 +834,7 @@ def select_model(
     report.warnings += [note for key, note in resolved.items() if key not in covered] + twins
     std = prob = None
     if n_models > 0:
-        xi, std, prob, dropped = _bootstrap(trajs, names, final_cfg, xi, n_models, seed,
+        xi, std, prob, dropped = _bootstrap(used, names, final_cfg, xi, n_models, seed,
                                             grown, ratio)  # fmt: skip
         report.warnings += dropped
     tally = TALLY.summary()

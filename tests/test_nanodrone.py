@@ -445,3 +445,26 @@ def test_full_benchmark_reaches_the_figures(tmp_path):
             assert value <= hold["mae"][h][group]
     assert ours["n_terms"] <= 60
     assert metrics["thrust_coefficient"] == pytest.approx(8.27e-7, rel=0.05)
+
+
+@needs_flights
+def test_identify_on_two_real_flights_bridges_lost_rows_and_finds_z_dot_equals_vz(tmp_path):
+    """The generic `identify` on two raw flights (6 % of rows re-sent by the radio): the lost
+    rows are bridged instead of splitting the flights into 70 fragments, and the kinematics
+    are found (the empty model, within the best's unpaired standard error, was chosen)."""
+    from typer.testing import CliRunner
+
+    from identification.model import load_model
+    from quad_sindy.cli import app
+
+    out = tmp_path / "vz.json"
+    files = [str(FLIGHTS / f"{n}_20251017_run1.parquet") for n in ("square", "random1")]
+    library = "degree=1;extra=thrust cos(roll) cos(pitch)"
+    args = ["identify", *files, "--states", "z,vz", "--inputs", "thrust,roll,pitch",
+            "--library", library, "--out", str(out)]  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "bridged instead" in result.output
+    model = load_model(out)
+    z = model.coefficients[model.state_names.index("z")]
+    assert abs(z[model.feature_names.index("vz")] - 1.0) < 0.05

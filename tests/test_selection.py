@@ -137,17 +137,53 @@ def test_cli_identify_any_names_and_show(tmp_path, other_clean):
     assert "\\pm" in latex.output
 
 
+def test_a_short_fragment_does_not_cap_the_window_and_horizon(other_clean):
+    from identification.selection import typical_length
+
+    fragment = other_clean[0].slice(0, 25)
+    assert typical_length([*other_clean, fragment]) == len(other_clean[0])
+    _, report = select_model([*other_clean, fragment], planar_library(),
+                             windows=(1, 64), n_models=0)  # fmt: skip
+    assert report.horizon == 50 and {c.window for c in report.candidates} == {1, 64}
+
+
 # -- real logs --------------------------------------------------------------------------
-def test_clean_drops_stale_rows_and_outliers_and_splits_at_gaps(other_clean):
+def test_clean_bridges_a_lost_sample_and_a_glitch_and_splits_at_gaps(other_clean):
     tr = other_clean[0]
     t, x = tr.t.copy(), tr.x.copy()
     x[100] = x[99]  # the logger re-sent a sample
     x[300, 2] += 0.5  # a glitch in phi
     t[450:] += 0.2  # a 0.2 s gap
     segs, report = clean(t, x, tr.u, PS, PI)
-    assert (report.stale_rows, report.outlier_rows, report.gaps) == (1, 1, 1)
-    assert report.segments == len(segs) == 4 and report.rows_out == len(tr) - 2
+    assert (report.stale_rows, report.outlier_rows, report.gaps, report.bridged) == (1, 1, 1, 2)
+    assert report.segments == len(segs) == 2 and report.rows_out == len(tr)
     assert all(np.all(np.diff(s.t) < 0.02) for s in segs)
+    # the two rows keep their time and input, their states are marked missing
+    assert np.flatnonzero(segs[0].missing).tolist() == [100, 300]
+    assert np.array_equal(segs[0].u, tr.u[:450]) and segs[1].missing is None
+    # without bridging, each lost row splits the log
+    segs, report = clean(t, x, tr.u, PS, PI, bridge=0)
+    assert report.segments == len(segs) == 4 and report.rows_out == len(tr) - 2
+
+
+def test_a_log_that_lost_a_quarter_of_its_rows_still_gives_the_exact_model(other_clean):
+    """A quarter of the rows re-sent by the logger (single rows, inputs and time fresh):
+    split at each, nothing longer than 3 rows would be left; bridged, the lost states are
+    predicted by the model being fitted, so the fit stays exact (the held input over a
+    doubled step instead gave 10 wrong terms and an 11 % rhs error)."""
+    rng = np.random.default_rng(0)
+    segments = []
+    for tr in other_clean:
+        x = tr.x.copy()
+        lost = rng.choice(np.arange(2, len(tr) - 1, 2), len(tr) // 4, replace=False)
+        x[lost] = x[lost - 1]
+        segs, report = clean(tr.t, x, tr.u, PS, PI)
+        assert report.stale_rows == report.bridged == len(tr) // 4 and len(segs) == 1
+        segments += segs
+    model, _ = select_model(segments, planar_library(), **FAST)
+    check = check_support(model, truth_planar(OTHER_PLANAR))
+    assert check.exact_support, (check.missed, check.spurious)
+    assert rhs_error(model, planar_drag_rhs(OTHER_PLANAR, 0.0), other_clean) < 1e-6
 
 
 def test_a_run_of_resent_rows_inside_motion_is_stale_and_a_rest_is_not(other_clean):
@@ -158,8 +194,8 @@ def test_a_run_of_resent_rows_inside_motion_is_stale_and_a_rest_is_not(other_cle
     x[301:321] = x[300]  # states frozen, time and inputs advance
     x[450] = np.nan
     segs, report = clean(tr.t, x, tr.u, PS, PI)
-    assert (report.stale_rows, report.nonfinite_rows) == (20, 1)
-    assert report.rows_out == len(tr) - 21 and report.segments == 3
+    assert (report.stale_rows, report.nonfinite_rows, report.bridged) == (20, 1, 1)
+    assert report.rows_out == len(tr) - 20 and report.segments == 2
     assert all(not np.any(np.all(s.x[1:] == s.x[:-1], axis=1)) for s in segs)
     rest = tr.x.copy()
     rest[:40] = rest[0]  # on the ground before take-off: entered at rest (the log's start)
@@ -746,3 +782,18 @@ def test_one_warning_names_every_twin_the_data_cannot_tell_from_a_kept_term():
     assert len(notes) == 1 and covered == {(0, 1, 2), (0, 1, 3)}
     assert notes[0].startswith("s': kept 'b'; its nearly collinear twins")
     assert "'b cos(phi)' (" in notes[0] and "'b sin(phi)' (" in notes[0]
+
+
+def test_the_empty_model_must_also_be_within_one_paired_standard_error():
+    """Folds of unequal difficulty: the empty model trails the best by 0.03 on every fold,
+    inside the best's standard error (0.05) but far outside the paired one (0): not chosen.
+    When its gap changes sign from fold to fold it is within the paired error and chosen."""
+    from identification.selection import Candidate, choose_one_se
+
+    folds = np.array([0.30, 0.50, 0.40, 0.20, 0.25])
+    best = Candidate(1, 0.1, 3, list(folds))
+    trailing = Candidate(1, 1.0, 0, list(folds + 0.03))
+    assert trailing.mean <= best.mean + best.se  # the unpaired rule alone would take it
+    assert choose_one_se([best, trailing]) == 0
+    noisy = Candidate(1, 1.0, 0, list(folds + np.array([0.06, -0.05, 0.07, -0.04, 0.01])))
+    assert choose_one_se([best, noisy]) == 1
