@@ -314,8 +314,6 @@ def clean(
     bad_x |= outliers
     # runs of bad states longer than ``bridge`` are dropped like bad times
     rows = np.flatnonzero(~dropped)
-    if rows.size == 0:
-        raise ValueError("no rows left after dropping stale rows and outliers")
     flagged = bad_x[rows]
     edges = np.flatnonzero(np.diff(np.concatenate([[0], flagged.astype(int), [0]])))
     for a, b in zip(edges[::2], edges[1::2], strict=True):

@@ -101,6 +101,11 @@ F_CRITICAL = 10.83
 refused when the residual grows by more than this many residual variances."""
 
 
+def standard_error(values: np.ndarray) -> float:
+    """Standard error of the mean of ``values`` (0 for a single value)."""
+    return float(values.std(ddof=1) / np.sqrt(values.size)) if values.size > 1 else 0.0
+
+
 @dataclass
 class Candidate:
     """One scored candidate.
@@ -125,7 +130,7 @@ class Candidate:
         scores = np.asarray(self.fold_scores)
         if np.isfinite(scores).all():
             self.mean = float(scores.mean())
-            self.se = float(scores.std(ddof=1) / np.sqrt(scores.size)) if scores.size > 1 else 0.0
+            self.se = standard_error(scores)
         else:
             self.mean = self.se = float("inf")
 
@@ -352,11 +357,11 @@ def choose_one_se(candidates: Sequence[Candidate], resolution: float = 0.0) -> i
     """
     best = best_candidate(candidates)
     limit = candidates[best].mean + candidates[best].se + resolution
-    ok = [i for i, c in enumerate(candidates) if c.mean <= limit * (1 + 1e-12)]
     ok = [
         i
-        for i in ok
-        if candidates[i].n_terms > 0 or _paired_within(candidates[i], candidates[best], resolution)
+        for i, c in enumerate(candidates)
+        if c.mean <= limit * (1 + 1e-12)
+        and (c.n_terms > 0 or _paired_within(c, candidates[best], resolution))
     ]
     return min(ok, key=lambda i: (candidates[i].n_terms, candidates[i].mean))
 
@@ -364,8 +369,7 @@ def choose_one_se(candidates: Sequence[Candidate], resolution: float = 0.0) -> i
 def _paired_within(c: Candidate, best: Candidate, resolution: float) -> bool:
     """Whether ``c`` trails ``best`` by at most one standard error of their fold differences."""
     d = np.asarray(c.fold_scores) - np.asarray(best.fold_scores)
-    se = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else 0.0
-    return float(d.mean()) <= (se + resolution) * (1 + 1e-12) + 1e-12 * best.mean
+    return float(d.mean()) <= (standard_error(d) + resolution) * (1 + 1e-12) + 1e-12 * best.mean
 
 
 # -- near-collinear pairs ---------------------------------------------------------------
