@@ -331,13 +331,17 @@ def best_candidate(candidates: Sequence[Candidate]) -> int:
     """Index of the best mean score.
 
     Raises:
-        ValueError: Every candidate diverged.
+        ValueError: Every candidate with terms diverged. The empty model (the state held)
+            never diverges, but it is no answer when it is the only one left: two real
+            Crazyflie flights, body rates from motor speeds, gave ``wx' = wy' = wz' = 0``
+            with exit 0 that way.
     """
     means = np.array([c.mean for c in candidates])
-    if not np.isfinite(means).any():
+    if not any(np.isfinite(c.mean) and c.n_terms > 0 for c in candidates):
         raise ValueError(
-            "every candidate model diverged when predicting the held-out data: the library "
-            "may not contain the dynamics, or the data are too short or too noisy"
+            "every candidate model with terms diverged when predicting the held-out data: "
+            "the library may not contain the dynamics, or the data are too short or too "
+            "noisy (holding the state, the only model left, is not an identified model)"
         )
     return int(np.nanargmin(means))
 
@@ -730,8 +734,9 @@ def select_model(
         report.
 
     Raises:
-        ValueError: Unidentifiable data (see :func:`identification.fit.check_identifiable`)
-            or every candidate diverged.
+        ValueError: Unidentifiable data (see :func:`identification.fit.check_identifiable`),
+            every candidate with terms diverged, or the chosen model has no term (nothing
+            predicts the held-out data better than holding the state).
     """
     from tqdm import tqdm
 
@@ -841,6 +846,8 @@ def select_model(
         xi, std, prob, dropped = _bootstrap(used, names, final_cfg, xi, n_models, seed,
                                             grown, ratio)  # fmt: skip
         report.warnings += dropped
+    if not np.any(xi):
+        raise ValueError(_empty_model_message(candidates))
     tally = TALLY.summary()
     if tally:
         report.warnings.append(tally)
@@ -854,6 +861,21 @@ def select_model(
     model = IdentifiedModel(names, xi, first.state_names, first.input_names, system, meta,
                             std, prob)  # fmt: skip
     return model, report
+
+
+def _empty_model_message(candidates: Sequence[Candidate]) -> str:
+    """Why an identified model with no term is refused, with the scores that say so."""
+    scored = [c for c in candidates if c.n_terms > 0 and np.isfinite(c.mean)]
+    held = [c.mean for c in candidates if c.n_terms == 0 and np.isfinite(c.mean)]
+    top = min(scored, key=lambda c: c.mean)
+    against = f"; the state held: {min(held):.3g}" if held else ""
+    terms = f"{top.n_terms} term{'s' if top.n_terms != 1 else ''}"
+    return (
+        "the identified model has no term: no model with terms predicts the held-out data "
+        f"significantly better than holding the state (best with terms: {terms}, "
+        f"score {top.mean:.3g}{against}); the library may not contain the dynamics, or the "
+        "inputs do not explain the states (lagged, mislabelled or closed-loop inputs)"
+    )
 
 
 def bag_spread(bags: np.ndarray) -> np.ndarray:

@@ -797,3 +797,38 @@ def test_the_empty_model_must_also_be_within_one_paired_standard_error():
     assert choose_one_se([best, trailing]) == 0
     noisy = Candidate(1, 1.0, 0, list(folds + np.array([0.06, -0.05, 0.07, -0.04, 0.01])))
     assert choose_one_se([best, noisy]) == 1
+
+
+def test_only_the_empty_model_left_is_refused_not_returned():
+    """When every candidate with terms diverged, the empty model (never diverging) is not an
+    answer: the selection refuses, naming the cause. One finite candidate with terms is
+    enough to choose."""
+    from identification.selection import Candidate, choose_one_se
+
+    inf = float("inf")
+    diverged = [Candidate(1, lam, n, [0.5, inf, 0.4]) for lam, n in ((1e-3, 12), (1e-2, 5))]
+    empty = Candidate(1, 1.0, 0, [0.8, 0.9, 0.7])
+    with pytest.raises(ValueError, match="every candidate model with terms diverged"):
+        choose_one_se([*diverged, empty])
+    finite = Candidate(1, 0.1, 2, [0.3, 0.35, 0.3])
+    assert choose_one_se([*diverged, finite, empty]) == 2
+
+
+def test_states_the_inputs_do_not_drive_are_refused_not_fitted_as_zero():
+    """Random walks with an unrelated random input: no term predicts held-out data better than
+    holding the state, so there is no model to return (before: every derivative 0, exit 0)."""
+    rng = np.random.default_rng(0)
+    t = np.arange(600) * 0.01
+    trajs = [
+        Trajectory(
+            t,
+            np.cumsum(rng.normal(0, 0.01, (600, 2)), axis=0),
+            rng.normal(0, 1, (600, 1)),
+            ("a", "b"),
+            ("c",),
+        )
+        for _ in range(4)
+    ]
+    library = library_from_spec("degree=2", ["a", "b"], ["c"])
+    with pytest.raises(ValueError, match="no model with terms predicts the held-out data"):
+        select_model(trajs, library, n_models=5)
