@@ -175,6 +175,8 @@ class CleanReport:
         outlier_rows: Rows dropped as outliers (robust z-score of the state).
         gaps: Time gaps (step > ``gap_factor`` x median step) where the log was split.
         bridged: Rows of the above kept as missing (time and input used, states predicted).
+        unwrapped: Jumps of 2 pi removed from declared angle states (a logger wrapping them
+            to [-pi, pi]).
         short_segments: Segments dropped as too short.
         segments: Number of segments returned.
         rows_out: Rows returned.
@@ -187,6 +189,7 @@ class CleanReport:
     outlier_rows: int = 0
     gaps: int = 0
     bridged: int = 0
+    unwrapped: int = 0
     short_segments: int = 0
     segments: int = 0
     rows_out: int = 0
@@ -199,6 +202,13 @@ class CleanReport:
             a, b = getattr(self, name), getattr(other, name)
             setattr(out, name, max(a, b) if name == "jitter" else a + b)
         return out
+
+    @property
+    def changed(self) -> bool:
+        """Whether cleaning changed anything a user should hear about."""
+        repaired = (self.stale_rows, self.nonfinite_rows, self.outlier_rows, self.gaps,
+                    self.bridged, self.unwrapped, self.short_segments)  # fmt: skip
+        return self.rows_out != self.rows_in or any(repaired) or self.jitter > 1e-6
 
     def summary(self) -> str:
         """One line for users."""
@@ -213,7 +223,12 @@ class CleanReport:
                 else ""
             )
             + f", {self.short_segments} short segment(s); split at {self.gaps} gap(s); "
-            f"time-step jitter {100 * self.jitter:.1f} % (each row's own step is used)"
+            + (
+                f"unwrapped {self.unwrapped} jump(s) of 2 pi in the angles; "
+                if self.unwrapped
+                else ""
+            )
+            + f"time-step jitter {100 * self.jitter:.1f} % (each row's own step is used)"
         )
 
 
@@ -227,8 +242,14 @@ def clean(
     outlier_z: float = 50.0,
     min_rows: int = 20,
     bridge: int = 2,
+    angles: Sequence[str] = (),
 ) -> tuple[list[Trajectory], CleanReport]:
     """Splits a raw log into clean segments: stale rows, outliers and gaps handled.
+
+    A row that repeats the row before in time, states and inputs (written twice) is removed.
+    Declared angle states are unwrapped first (a jump above pi between rows is a logger
+    wrapping the angle to [-pi, pi], not motion): a wrapped angle would otherwise leave every
+    row after the jump 2 pi off (a pendulum log gave ``theta' = 0`` that way).
 
     A row is *stale* when its time does not advance, or when its states repeat the previous
     row's exactly after the vehicle moved into that row: a logger that re-sent an old sample
@@ -258,15 +279,28 @@ def clean(
         outlier_z: Robust z-score above which a row is an outlier.
         min_rows: Shortest segment kept.
         bridge: Longest run of rows with bad states kept as missing (0: drop them all).
+        angles: Angle variables; those among the states are unwrapped.
 
     Returns:
         The clean segments and the report.
     """
-    t, x, u = (np.asarray(a, dtype=np.float64) for a in (t, x, u))
-    x, u = x.reshape(t.size, -1), u.reshape(t.size, -1)
+    t = np.asarray(t, dtype=np.float64)
+    x = np.array(x, dtype=np.float64).reshape(t.size, -1)  # a copy: angles are unwrapped
+    u = np.asarray(u, dtype=np.float64).reshape(t.size, -1)
+    report = CleanReport(rows_in=t.size)
+    twice = np.zeros(t.size, dtype=bool)
+    twice[1:] = (
+        (t[1:] == t[:-1]) & np.all(x[1:] == x[:-1], axis=1) & np.all(u[1:] == u[:-1], axis=1)
+    )
+    t, x, u = t[~twice], x[~twice], u[~twice]
+    for j, name in enumerate(state_names):
+        ok = np.isfinite(x[:, j])
+        if name in angles and ok.sum() > 1:
+            unwrapped = np.unwrap(x[ok, j])
+            report.unwrapped += int(np.count_nonzero(np.abs(np.diff(unwrapped - x[ok, j])) > 1.0))
+            x[ok, j] = unwrapped
     finite_x = np.isfinite(x).all(axis=1)
     finite = np.isfinite(t) & finite_x & np.isfinite(u).all(axis=1)
-    report = CleanReport(rows_in=t.size)
     same = np.zeros(t.size, dtype=bool)
     same[1:] = np.all(x[1:] == x[:-1], axis=1)  # row k repeats row k-1
     # A run of repeats of row k-1 is a logger re-sending it when the vehicle moved into row
@@ -287,7 +321,7 @@ def clean(
     t_run = np.where(np.isfinite(t), t, -np.inf)
     late[1:] = t_run[1:] <= np.maximum.accumulate(t_run)[:-1]  # repeats and steps back
     stale = resent | late
-    report.stale_rows = int((stale & finite).sum())
+    report.stale_rows = int((stale & finite).sum()) + int(twice.sum())
     report.nonfinite_rows = int((~finite).sum())
     dropped = ~good_tu | late
     bad_x = (resent | ~finite_x) & ~dropped
@@ -385,7 +419,8 @@ def resolve_names(
     cols = list(columns)
     if time not in cols:
         raise ValueError(
-            f"no time column {time!r} (name it with time= / --time) among the columns {cols}"
+            f"no time column {time!r} among the columns {cols} (name it with --time; time= "
+            "in Python)"
         )
     if len(set(cols) - {"_"}) != len([c for c in cols if c != "_"]):
         raise ValueError(f"duplicate column names in {cols}")
@@ -417,8 +452,8 @@ def resolve_names(
             raise ValueError(f"column(s) {sorted(both)} named as both state and input")
     if not st or not inp:
         raise ValueError(
-            f"no states or no inputs among the columns {cols}: name them with states=/inputs= "
-            "(--states, --inputs)"
+            f"no states or no inputs among the columns {cols}: name them with --states and "
+            "--inputs (states=, inputs= in Python)"
         )
     return st, inp
 
@@ -470,7 +505,7 @@ def _read_table(
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such data file: {path}")
-    if path.suffix.lower() in PARQUET_SUFFIXES:
+    if path.suffix.lower() in (*PARQUET_SUFFIXES, ".npz"):
         table = read_table(path)
         names = list(table)
         if not names or not len(table[names[0]]):
@@ -494,7 +529,9 @@ def _read_table(
     has_header = any(ch.isalpha() for ch in first.replace("e-", "").replace("e+", ""))
     if columns is None:
         if not has_header:
-            raise ValueError(f"{path} has no header: pass columns= (--columns) naming its columns")
+            raise ValueError(
+                f"{path} has no header: pass --columns (columns= in Python) naming its columns"
+            )
         columns = [c.strip() for c in first.split(",")]
     try:
         data = np.loadtxt(
@@ -514,23 +551,28 @@ PARQUET_SUFFIXES = (".parquet", ".pq")
 
 
 def read_table(path: str | Path, columns: Sequence[str] | None = None) -> dict[str, np.ndarray]:
-    """Reads a parquet or CSV file into float64 columns (timestamps as seconds).
+    """Reads a parquet, CSV or NPZ file into float64 columns.
 
-    With ``columns`` None, columns that are not numeric (text labels) are left out.
+    Timestamps become seconds since the earliest one (exact: float64 seconds since 1970
+    would round the steps). With ``columns`` None, columns that are not numeric (text labels)
+    are left out.
 
     Args:
-        path: ``.parquet`` / ``.pq`` or ``.csv`` file.
+        path: ``.parquet`` / ``.pq``, ``.csv`` or ``.npz`` (one 1-D array per column) file.
         columns: Only these columns (all when None); a missing one raises ValueError.
 
     Returns:
         Column name -> 1-D float array.
     """
     import pyarrow as pa
+    import pyarrow.compute as pc
 
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such log file: {path}")
     suffix = path.suffix.lower()
+    if suffix == ".npz":
+        return _read_npz_table(path, columns)
     try:
         if suffix in PARQUET_SUFFIXES:
             import pyarrow.parquet as pq
@@ -546,20 +588,62 @@ def read_table(path: str | Path, columns: Sequence[str] | None = None) -> dict[s
             if columns:
                 table = table.select(list(columns))
         else:
-            raise ValueError(f"{path}: unsupported log format {suffix!r} (use .parquet or .csv)")
+            raise ValueError(
+                f"{path}: unsupported log format {suffix!r} (use .parquet, .csv or .npz)"
+            )
     except (OSError, pa.ArrowInvalid) as exc:  # unreadable, or not that format inside
         raise ValueError(f"{path}: cannot read the log ({exc})") from None
     out: dict[str, np.ndarray] = {}
     for name in table.column_names:
         column = table.column(name)
         scale = 1.0
-        if pa.types.is_timestamp(column.type):  # to seconds
-            column, scale = column.cast(pa.timestamp("ns")).cast(pa.int64()), 1e-9
+        if pa.types.is_timestamp(column.type):  # seconds since the first, exact in int64
+            ns = column.cast(pa.timestamp("ns")).cast(pa.int64())
+            column, scale = pc.subtract(ns, pc.min(ns)), 1e-9
         try:
             out[name] = column.to_numpy(zero_copy_only=False).astype(np.float64) * scale
         except (TypeError, ValueError):
             if columns:
                 raise ValueError(f"{path}: column {name!r} is not numeric") from None
+    return out
+
+
+def is_npz_archive(path: str | Path) -> bool:
+    """Whether ``path`` is an NPZ archive of trajectories written by :func:`save_npz`."""
+    if Path(path).suffix.lower() != ".npz" or not Path(path).exists():
+        return False
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return "count" in data.files
+    except (OSError, ValueError):
+        return False
+
+
+def _read_npz_table(path: Path, columns: Sequence[str] | None) -> dict[str, np.ndarray]:
+    """An NPZ log: one 1-D numeric array per column, all of the same length."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {name: data[name] for name in data.files}
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: cannot read the NPZ file ({exc})") from None
+    _check_columns(path, list(arrays), columns)
+    layout = (
+        "an NPZ log holds one 1-D array per column (t, states, inputs), or the trajectory "
+        "archive that quad-sindy writes (count, t_0, x_0, u_0, state_names_0, ...)"
+    )
+    out: dict[str, np.ndarray] = {}
+    for name, values in arrays.items():
+        if columns and name not in columns:
+            continue
+        if values.ndim == 1 and values.dtype.kind not in "biuf" and not columns:
+            continue  # text labels are left out, as in parquet logs
+        if values.ndim != 1 or values.dtype.kind not in "biuf":
+            raise ValueError(f"{path}: {layout}; array {name!r} has shape {values.shape} "
+                             f"and type {values.dtype}")  # fmt: skip
+        out[name] = values.astype(np.float64)
+    if len({v.size for v in out.values()}) > 1:
+        sizes = {k: v.size for k, v in out.items()}
+        raise ValueError(f"{path}: {layout}; the arrays differ in length {sizes}")
     return out
 
 
@@ -576,6 +660,7 @@ def read_log(
     states: Sequence[str] | None = None,
     inputs: Sequence[str] | None = None,
     time: str = "t",
+    angles: Sequence[str] = (),
 ) -> tuple[list[Trajectory], CleanReport]:
     """Reads a raw CSV or parquet log and :func:`clean` s it: segments and what was dropped.
 
@@ -587,6 +672,7 @@ def read_log(
         states: Explicit state columns.
         inputs: Explicit input columns.
         time: Name of the time column.
+        angles: Angle variables (unwrapped by :func:`clean`).
 
     Returns:
         Clean segments and the report.
@@ -594,7 +680,7 @@ def read_log(
     cols, data, st, inp = _read_table(path, columns, system, states, inputs, time)
     segs, report = clean(
         data[:, cols.index(time)], data[:, [cols.index(c) for c in st]],
-        data[:, [cols.index(c) for c in inp]], st, inp,
+        data[:, [cols.index(c) for c in inp]], st, inp, angles=angles,
     )  # fmt: skip
     for seg in segs:
         seg.meta["source"] = str(path)
@@ -635,7 +721,7 @@ def load_npz(path: str | Path) -> list[Trajectory]:
                 for i in range(count)
             ]
     except KeyError as exc:
-        raise ValueError(f"{path} is not a quad-sindy trajectory archive (missing {exc})") from None
+        raise ValueError(f"{path} is not a quad-sindy trajectory archive ({exc.args[0]})") from None
 
 
 def load_data(
@@ -645,10 +731,12 @@ def load_data(
     states: Sequence[str] | None = None,
     inputs: Sequence[str] | None = None,
     time: str = "t",
+    angles: Sequence[str] = (),
 ) -> tuple[list[Trajectory], CleanReport]:
     """Reads CSV and parquet logs (cleaned: :func:`read_log`) and NPZ archives as segments.
 
-    Arguments as :func:`read_log` (``time``: the logs' time column, in seconds).
+    Arguments as :func:`read_log` (``time``: the logs' time column, in seconds; ``angles``:
+    the angle variables, unwrapped).
 
     Returns:
         The segments and the merged cleaning report.
@@ -658,14 +746,15 @@ def load_data(
     first: tuple[str, tuple[str, ...]] | None = None
     for path in paths:
         try:
-            if str(path).endswith(".npz"):
+            if is_npz_archive(path):
                 segs = []
                 for tr in load_npz(path):
-                    part, rep = clean(tr.t, tr.x, tr.u, tr.state_names, tr.input_names)
+                    part, rep = clean(tr.t, tr.x, tr.u, tr.state_names, tr.input_names,
+                                      angles=angles)  # fmt: skip
                     segs += part
                     report = report.merge(rep)
             else:
-                segs, rep = read_log(path, columns, system, states, inputs, time)
+                segs, rep = read_log(path, columns, system, states, inputs, time, angles)
                 report = report.merge(rep)
         except ValueError as exc:
             message = str(exc)

@@ -268,6 +268,14 @@ def library_from_spec(
     return list(dict.fromkeys(names))
 
 
+def spec_angles(spec: str | None) -> tuple[str, ...]:
+    """The angles a spec string or TOML file declares (none for presets and None)."""
+    if not spec or spec in PRESETS:
+        return ()
+    fields = _read_toml(Path(spec), ()) if spec.endswith(".toml") else _parse_spec_text(spec)
+    return tuple(fields.get("angles", ()))  # type: ignore[arg-type]
+
+
 def _read_toml(path: Path, angles: Sequence[str]) -> dict[str, object]:
     if sys.version_info >= (3, 11):
         import tomllib

@@ -206,7 +206,7 @@ def identify(
 
     from identification.data import PRESET_ANGLES, load_data
     from identification.fit import FitConfig, fit
-    from identification.libraries import library_from_spec
+    from identification.libraries import library_from_spec, spec_angles
     from identification.selection import WINDOWS, select_model
 
     def split(text: str | None) -> list[str] | None:
@@ -221,11 +221,11 @@ def identify(
             and library in ("planar", "quad6dof")
         ):
             preset = library
-        trajs, cleaning = load_data(
-            data, split(columns), preset, split(states), split(inputs), time.strip()
+        declared = (
+            split(angles) or list(spec_angles(library)) or list(PRESET_ANGLES.get(preset or "", ()))
         )
-        if cleaning.rows_out != cleaning.rows_in or cleaning.gaps or cleaning.jitter > 1e-6:
-            typer.echo(f"data: {cleaning.summary()}")
+        read = (data, split(columns), preset, split(states), split(inputs), time.strip())
+        trajs, cleaning = load_data(*read, angles=declared)
         first = trajs[0]
         library_note = None
         if preset is None and library is None and angles is None:
@@ -235,6 +235,16 @@ def identify(
                     f"library: the {preset} vehicle's preset (the data's variables are its "
                     "variables; --library or --angles choose another)"
                 )
+                declared = list(PRESET_ANGLES.get(preset, ()))
+                trajs, cleaning = load_data(*read, angles=declared)  # its angles unwrapped
+                first = trajs[0]
+        if cleaning.changed:
+            typer.echo(f"data: {cleaning.summary()}")
+        if first.dt >= 1.0:
+            typer.echo(
+                f"warning: the time step is {first.dt:g}: the time column is read in seconds "
+                "(a log in milliseconds gives rates 1000 times too small)"
+            )
         if method == "paper":
             from identification.experiments.paper import PAPER_LAMBDA, fit_paper
 
@@ -242,10 +252,19 @@ def identify(
                 _fail("the paper's method is defined for the planar system only")
             model = fit_paper(trajs, PAPER_LAMBDA if lam == "auto" else float(lam))
         else:
-            declared = split(angles) or list(PRESET_ANGLES.get(preset or "", ()))
             lib = library_from_spec(
                 library or preset, first.state_names, first.input_names, declared
             )
+            if library is None and preset is None:
+                trig = (
+                    f", sin and cos of {', '.join(declared)} alone and times each variable"
+                    if declared
+                    else ""
+                )
+                library_note = (
+                    f"library: polynomials of degree 2{trig} ({len(lib)} terms; --library "
+                    "chooses another)"
+                )
             config = FitConfig(derivative=method, optimizer=optimizer)
             label = preset or (library if library in ("planar", "quad6dof") else None)
             if lam == "auto":
@@ -272,6 +291,7 @@ def identify(
                     typer.echo(library_note)
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
+    model.meta["data"] = {**dataclasses.asdict(cleaning), "summary": cleaning.summary()}
     model.save(out)
     typer.echo("\n".join(model.equations()))
     typer.echo(f"wrote {out}")

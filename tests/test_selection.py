@@ -220,6 +220,65 @@ def test_identify_drops_a_stalled_logger_run_and_finds_gravity(other_clean, tmp_
     assert check.exact_support, (check.missed, check.spurious)
 
 
+def test_a_wrapped_angle_is_unwrapped_and_reported(other_clean, tmp_path):
+    """A logger wrapping phi to [-pi, pi] (here: 2 pi jumps at rows 200, 400 and 500): the
+    jumps were bridged as outliers and every row after them left 2 pi off (a pendulum gave
+    ``theta' = 0`` with exit 0). Declared angles are unwrapped; the repair is reported even
+    though no row is lost, and stored in the model."""
+    paths = []
+    for i, tr in enumerate(other_clean):
+        x = tr.x.copy()
+        x[200:400, 2] += 2 * np.pi
+        x[500:, 2] -= 2 * np.pi
+        paths.append(
+            str(write_trajectory_csv(tmp_path / f"f{i}.csv", Trajectory(tr.t, x, tr.u, PS, PI)))
+        )
+        segs, report = clean(tr.t, x, tr.u, PS, PI, angles=("phi",))
+        assert report.unwrapped == 3 and report.outlier_rows == 0 and len(segs) == 1
+        assert np.allclose(segs[0].x, tr.x, rtol=0, atol=1e-12)
+    out = tmp_path / "m.json"
+    result = CliRunner().invoke(app, ["identify", *paths, "--out", str(out), "--system", "planar",
+                                      "--window", "4"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "unwrapped 9 jump(s) of 2 pi" in result.output
+    model = load_model(out)
+    assert model.meta["data"]["unwrapped"] == 9 and model.meta["data"]["rows_out"] == 1800
+    check = check_support(model, truth_planar(OTHER_PLANAR))
+    assert check.exact_support, (check.missed, check.spurious)
+
+
+def test_a_row_written_twice_is_removed_without_splitting_the_log(other_clean):
+    tr = other_clean[0]
+    keep = np.insert(np.arange(len(tr)), 300, 299)  # row 299 written twice
+    segs, report = clean(tr.t[keep], tr.x[keep], tr.u[keep], PS, PI)
+    assert (report.rows_in, report.stale_rows, report.segments) == (len(tr) + 1, 1, 1)
+    assert np.array_equal(segs[0].t, tr.t) and segs[0].missing is None
+
+
+def test_timestamps_and_npz_columns_are_read_exactly(other_clean, tmp_path):
+    """Epoch timestamps kept their steps to 2.5e-5 relative only (float64 seconds since 1970);
+    an NPZ file of named 1-D columns is a log like a CSV, and any other NPZ layout is refused
+    naming the array that does not fit."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from identification.data import read_table
+
+    tr = other_clean[0]
+    ns = np.int64(1_764_000_000_000_000_000) + np.round(tr.t * 1e9).astype(np.int64)
+    pq.write_table(pa.table({"stamp": pa.array(ns, pa.timestamp("ns")), "y": tr.x[:, 0]}),
+                   tmp_path / "log.parquet")  # fmt: skip
+    stamp = read_table(tmp_path / "log.parquet")["stamp"]
+    assert stamp[0] == 0.0 and np.allclose(np.diff(stamp), np.diff(tr.t), rtol=1e-12, atol=0)
+    columns = dict(zip(("t", *PS, *PI), np.column_stack([tr.t, tr.x, tr.u]).T, strict=True))
+    np.savez(tmp_path / "log.npz", **columns)
+    segs, _ = load_data([tmp_path / "log.npz"], system="planar")
+    assert np.array_equal(segs[0].x, tr.x) and segs[0].input_names == PI
+    np.savez(tmp_path / "matrix.npz", t=tr.t, X=tr.x, U=tr.u)
+    with pytest.raises(ValueError, match="one 1-D array per column.*'X' has shape"):
+        load_data([tmp_path / "matrix.npz"], system="planar")
+
+
 def test_load_data_names_the_file_that_is_too_short_or_logs_other_variables(other_clean, tmp_path):
     good = str(write_trajectory_csv(tmp_path / "good.csv", other_clean[0]))
     tr = other_clean[1]
