@@ -687,6 +687,7 @@ def test_clean_six_dof_data_from_another_integrator_give_the_exact_model():
 
 
 def test_bag_spread_is_the_standard_deviation_of_normal_bags_and_ignores_one_wild_bag():
+    """And a kept term that most bags leave out is not shown as certain (+-0)."""
     from identification.selection import bag_spread
 
     rng = np.random.default_rng(0)
@@ -696,6 +697,9 @@ def test_bag_spread_is_the_standard_deviation_of_normal_bags_and_ignores_one_wil
     bags[-1] = -60.0  # one resample on which the fit went wild
     assert bags.std() > 10
     assert bag_spread(bags)[0] < 5e-3
+    rare = np.zeros((20, 1))
+    rare[0] = 2.0  # a kept term that 19 of 20 bags leave out is as uncertain as it is large
+    assert bag_spread(rare, np.array([2.0]))[0] == 2.0
 
 
 def test_truth_gaps_separate_a_search_miss_from_twins_the_data_cannot_tell_apart():
