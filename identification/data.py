@@ -61,6 +61,10 @@ class Trajectory:
             states a placeholder (interpolated). The RK4 formulation predicts them with the
             model being fitted (exact, as for observed rows), no fit targets or score compare
             them, and no prediction starts from them.
+        measured: Inputs that are measured signals sampled at the rows (a logged attitude
+            fed to a translational model), not commands held over each step: the RK4 stages
+            interpolate them (:meth:`stage_inputs`). Held, a tilt that changes within the
+            step left terms of about g dt / 2 in the fit.
     """
 
     t: np.ndarray
@@ -71,6 +75,7 @@ class Trajectory:
     refs: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
     missing: np.ndarray | None = None
+    measured: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         self.t = np.asarray(self.t, dtype=np.float64)
@@ -85,6 +90,10 @@ class Trajectory:
                 )
             if not self.missing.any():
                 self.missing = None
+        self.measured = tuple(self.measured)
+        unknown = [n for n in self.measured if n not in self.input_names]
+        if unknown:
+            raise ValueError(f"measured input(s) {unknown} are not inputs {list(self.input_names)}")
         validate(self)
 
     @property
@@ -119,8 +128,41 @@ class Trajectory:
         missing = None if self.missing is None else self.missing[start:stop]
         return Trajectory(
             self.t[start:stop], self.x[start:stop], self.u[start:stop], self.state_names,
-            self.input_names, refs, dict(self.meta), missing,
+            self.input_names, refs, dict(self.meta), missing, self.measured,
         )  # fmt: skip
+
+    def stage_inputs(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The inputs at the start, middle and end of the steps that start at ``rows``.
+
+        A held input keeps its row's value over the step (the same array is returned three
+        times when every input is held). A :attr:`measured` input is the next row's sample
+        at the end, and at the middle the cubic through the four nearest samples (each row's
+        own time; linear next to either end): fourth order, as RK4 is in the states.
+
+        Args:
+            rows: Row indices, each below ``len(self) - 1``.
+        """
+        u0 = self.u[rows]
+        if not self.measured:
+            return u0, u0, u0
+        cols = [self.input_names.index(n) for n in self.measured]
+        um, u1 = u0.copy(), u0.copy()
+        u1[:, cols] = self.u[rows + 1][:, cols]
+        um[:, cols] = 0.5 * (u0[:, cols] + u1[:, cols])
+        inner = np.flatnonzero((rows >= 1) & (rows + 2 < len(self)))
+        if inner.size:
+            r = rows[inner]
+            nodes = np.stack([self.t[r + j] for j in (-1, 0, 1, 2)], axis=1)
+            mid = 0.5 * (self.t[r] + self.t[r + 1])
+            value = np.zeros((r.size, len(cols)))
+            for j in range(4):  # Lagrange weights at the midpoint
+                weight = np.ones(r.size)
+                for m in range(4):
+                    if m != j:
+                        weight *= (mid - nodes[:, m]) / (nodes[:, j] - nodes[:, m])
+                value += weight[:, None] * self.u[r + j - 1][:, cols]
+            um[np.ix_(inner, cols)] = value
+        return u0, um, u1
 
     @classmethod
     def from_run(cls, run: Any, inputs: str = "applied", **meta: Any) -> Trajectory:
@@ -243,6 +285,7 @@ def clean(
     min_rows: int = 20,
     bridge: int = 2,
     angles: Sequence[str] = (),
+    measured: Sequence[str] = (),
 ) -> tuple[list[Trajectory], CleanReport]:
     """Splits a raw log into clean segments: stale rows, outliers and gaps handled.
 
@@ -280,6 +323,7 @@ def clean(
         min_rows: Shortest segment kept.
         bridge: Longest run of rows with bad states kept as missing (0: drop them all).
         angles: Angle variables; those among the states are unwrapped.
+        measured: Inputs that are measured signals (:attr:`Trajectory.measured`).
 
     Returns:
         The clean segments and the report.
@@ -376,7 +420,8 @@ def clean(
             for j in range(xp.shape[1]):
                 xp[missing, j] = np.interp(tp[missing], tp[~missing], xp[~missing, j])
             report.bridged += int(missing.sum())
-        seg = Trajectory(t[part], xp, u[part], state_names, input_names, missing=missing)
+        seg = Trajectory(t[part], xp, u[part], state_names, input_names, missing=missing,
+                         measured=tuple(measured))  # fmt: skip
         segments.append(seg)
         dev = np.abs(seg.steps / median - 1.0).max() if median else 0.0
         report.jitter = max(report.jitter, float(dev))
@@ -661,6 +706,7 @@ def read_log(
     inputs: Sequence[str] | None = None,
     time: str = "t",
     angles: Sequence[str] = (),
+    measured: Sequence[str] = (),
 ) -> tuple[list[Trajectory], CleanReport]:
     """Reads a raw CSV or parquet log and :func:`clean` s it: segments and what was dropped.
 
@@ -673,6 +719,7 @@ def read_log(
         inputs: Explicit input columns.
         time: Name of the time column.
         angles: Angle variables (unwrapped by :func:`clean`).
+        measured: Inputs that are measured signals (:attr:`Trajectory.measured`).
 
     Returns:
         Clean segments and the report.
@@ -680,7 +727,7 @@ def read_log(
     cols, data, st, inp = _read_table(path, columns, system, states, inputs, time)
     segs, report = clean(
         data[:, cols.index(time)], data[:, [cols.index(c) for c in st]],
-        data[:, [cols.index(c) for c in inp]], st, inp, angles=angles,
+        data[:, [cols.index(c) for c in inp]], st, inp, angles=angles, measured=measured,
     )  # fmt: skip
     for seg in segs:
         seg.meta["source"] = str(path)
@@ -732,11 +779,12 @@ def load_data(
     inputs: Sequence[str] | None = None,
     time: str = "t",
     angles: Sequence[str] = (),
+    measured: Sequence[str] = (),
 ) -> tuple[list[Trajectory], CleanReport]:
     """Reads CSV and parquet logs (cleaned: :func:`read_log`) and NPZ archives as segments.
 
     Arguments as :func:`read_log` (``time``: the logs' time column, in seconds; ``angles``:
-    the angle variables, unwrapped).
+    the angle variables, unwrapped; ``measured``: the inputs that are measured signals).
 
     Returns:
         The segments and the merged cleaning report.
@@ -750,11 +798,12 @@ def load_data(
                 segs = []
                 for tr in load_npz(path):
                     part, rep = clean(tr.t, tr.x, tr.u, tr.state_names, tr.input_names,
-                                      angles=angles)  # fmt: skip
+                                      angles=angles, measured=measured)  # fmt: skip
                     segs += part
                     report = report.merge(rep)
             else:
-                segs, rep = read_log(path, columns, system, states, inputs, time, angles)
+                segs, rep = read_log(path, columns, system, states, inputs, time, angles,
+                                     measured)  # fmt: skip
                 report = report.merge(rep)
         except ValueError as exc:
             message = str(exc)

@@ -236,24 +236,56 @@ def _window_mean(rows: np.ndarray, weights: np.ndarray, w: int) -> np.ndarray:
     return (c[w:] - c[:-w]) / (cw[w:] - cw[:-w])[:, None]
 
 
+Stages = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""Inputs at the start, middle and end of each step (:meth:`Trajectory.stage_inputs`)."""
+
+
 def _rk4_stage_theta(
-    theta: Callable, rhs: Callable, x: np.ndarray, u: np.ndarray, h: np.ndarray
+    theta: Callable, rhs: Callable, x: np.ndarray, u: Stages, h: np.ndarray
 ) -> np.ndarray:
-    """RK4 average of Theta over the stages of each step (input held, step h per row)."""
+    """RK4 average of Theta over the stages of each step (step h per row)."""
     h = h[:, None]
-    k1 = rhs(x, u)
+    u0, um, u1 = u
+    k1 = rhs(x, u0)
     s2 = x + 0.5 * h * k1
-    k2 = rhs(s2, u)
+    k2 = rhs(s2, um)
     s3 = x + 0.5 * h * k2
-    k3 = rhs(s3, u)
+    k3 = rhs(s3, um)
     s4 = x + h * k3
-    return (theta(x, u) + 2 * theta(s2, u) + 2 * theta(s3, u) + theta(s4, u)) / 6.0
+    return (theta(x, u0) + 2 * theta(s2, um) + 2 * theta(s3, um) + theta(s4, u1)) / 6.0
+
+
+def rk4_steps(
+    rhs: Callable, x: np.ndarray, u: Stages, h: np.ndarray, substeps: int = 1
+) -> np.ndarray:
+    """One RK4 step of each row (step h per row), in ``substeps`` equal parts.
+
+    Held inputs (the same array three times) stay constant; otherwise the input over the
+    step is the parabola through its start, middle and end values.
+    """
+    u0, um, u1 = u
+    held = um is u0 and u1 is u0
+    h = h[:, None] / substeps
+
+    def at(tau: float) -> np.ndarray:
+        if held:
+            return u0
+        return u0 + tau * (4 * um - 3 * u0 - u1) + tau**2 * (2 * u0 - 4 * um + 2 * u1)
+
+    for i in range(substeps):
+        a, m, b = at(i / substeps), at((i + 0.5) / substeps), at((i + 1) / substeps)
+        k1 = rhs(x, a)
+        k2 = rhs(x + 0.5 * h * k1, m)
+        k3 = rhs(x + 0.5 * h * k2, m)
+        k4 = rhs(x + h * k3, b)
+        x = x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
+    return x
 
 
 def predict_missing(tr: Trajectory, rhs: Callable) -> np.ndarray:
     """The states of ``tr`` with its missing rows predicted by RK4 steps of ``rhs``.
 
-    Each missing row is one RK4 step (the logged input held, its own step) from the row
+    Each missing row is one RK4 step (the logged inputs, its own step) from the row
     before it, so a run of missing rows is predicted from the last observed one. With the
     true coefficients this reproduces data made by RK4 exactly: the fit's fixed point is
     unchanged by the rows the logger lost.
@@ -268,12 +300,7 @@ def predict_missing(tr: Trajectory, rhs: Callable) -> np.ndarray:
     h = np.diff(tr.t)
     for depth in range(1, int(run.max()) + 1):
         k = np.flatnonzero((run == depth) & (np.arange(miss.size) > 0))
-        x0, u0, hk = x[k - 1], tr.u[k - 1], h[k - 1][:, None]
-        k1 = rhs(x0, u0)
-        k2 = rhs(x0 + 0.5 * hk * k1, u0)
-        k3 = rhs(x0 + 0.5 * hk * k2, u0)
-        k4 = rhs(x0 + hk * k3, u0)
-        x[k] = x0 + hk / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
+        x[k] = rk4_steps(rhs, x[k - 1], tr.stage_inputs(k - 1), h[k - 1])
     return x
 
 
@@ -333,12 +360,13 @@ def iter_rows(
         xs = predict_missing(tr, rhs) if rhs is not None else tr.x
         for s in range(0, n_rows, step):
             stop = min(s + step, n_rows)  # window rows s..stop-1 use samples s..stop-1+window
-            x, u = xs[s : stop + window - 1], tr.u[s : stop + window - 1]
+            x = xs[s : stop + window - 1]
             h = np.diff(tr.t[s : stop + window])
             if derivative == "forward":
-                rows = theta(x, u)
+                rows = theta(x, tr.u[s : stop + window - 1])
             else:
-                rows = _rk4_stage_theta(theta, rhs, x, u, h)
+                stages = tr.stage_inputs(np.arange(s, stop + window - 1))
+                rows = _rk4_stage_theta(theta, rhs, x, stages, h)
             y = (xs[s + window : stop + window] - xs[s:stop]) / (
                 tr.t[s + window : stop + window] - tr.t[s:stop]
             )[:, None]
@@ -693,6 +721,7 @@ def fit(
     meta = {
         **config.label,
         "n_trajectories": len(trajs),
+        **({"measured_inputs": list(trajs[0].measured)} if trajs[0].measured else {}),
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "conditioning": conditioning,

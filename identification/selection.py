@@ -74,6 +74,7 @@ from identification.fit import (
     fit_coefficients,
     grams,
     iter_rows,
+    rk4_steps,
     serial_blas,
     solve,
     solve_lambdas,
@@ -258,14 +259,7 @@ def _rollouts(rhs: Any, tr: Trajectory, horizon: int, max_starts: int, substeps:
     x = tr.x[starts]
     steps = np.diff(tr.t)
     for j in range(h_len):
-        u = tr.u[starts + j]
-        h = steps[starts + j][:, None] / substeps
-        for _ in range(substeps):
-            k1 = rhs(x, u)
-            k2 = rhs(x + 0.5 * h * k1, u)
-            k3 = rhs(x + 0.5 * h * k2, u)
-            k4 = rhs(x + h * k3, u)
-            x = x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
+        x = rk4_steps(rhs, x, tr.stage_inputs(starts + j), steps[starts + j], substeps)
         yield x, tr.x[starts + j + 1], seen[starts + j + 1]
 
 
@@ -854,6 +848,7 @@ def select_model(
     meta = {
         **final_cfg.label,
         "n_trajectories": len(trajs),
+        **({"measured_inputs": list(trajs[0].measured)} if trajs[0].measured else {}),
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "selection": report.to_meta(),

@@ -185,6 +185,13 @@ def identify(
     states: Annotated[str | None, typer.Option(help="state columns, comma-separated")] = None,
     inputs: Annotated[str | None, typer.Option(help="input columns, comma-separated")] = None,
     angles: Annotated[str | None, typer.Option(help="angle states (Fourier terms)")] = None,
+    measured: Annotated[
+        str | None,
+        typer.Option(
+            help="inputs that are measured signals (a logged attitude), not commands held "
+            "over each step: interpolated within the step"
+        ),
+    ] = None,
     library: Annotated[
         str | None,
         typer.Option(help="planar | quad6dof | FILE.toml | 'degree=2;angles=phi;extra=...'"),
@@ -225,7 +232,7 @@ def identify(
             split(angles) or list(spec_angles(library)) or list(PRESET_ANGLES.get(preset or "", ()))
         )
         read = (data, split(columns), preset, split(states), split(inputs), time.strip())
-        trajs, cleaning = load_data(*read, angles=declared)
+        trajs, cleaning = load_data(*read, angles=declared, measured=split(measured) or ())
         first = trajs[0]
         library_note = None
         if preset is None and library is None and angles is None:
@@ -236,7 +243,7 @@ def identify(
                     "variables; --library or --angles choose another)"
                 )
                 declared = list(PRESET_ANGLES.get(preset, ()))
-                trajs, cleaning = load_data(*read, angles=declared)  # its angles unwrapped
+                trajs, cleaning = load_data(*read, angles=declared, measured=first.measured)
                 first = trajs[0]
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")

@@ -279,6 +279,60 @@ def test_timestamps_and_npz_columns_are_read_exactly(other_clean, tmp_path):
         load_data([tmp_path / "matrix.npz"], system="planar")
 
 
+def test_a_measured_attitude_as_input_is_interpolated_within_the_step(other_clean, tmp_path):
+    """The translational planar model with the logged attitude as an input (a new-user log):
+    held over the step like a command, the tilt changing within it left a fake drag term
+    (y_dot' = -0.032 y_dot - 1.9994 sin(phi) u1); declared measured, the RK4 stages see phi
+    interpolated and the model is exact."""
+    names, inputs = ("y", "z", "y_dot", "z_dot"), ("u1", "phi")
+    library = library_from_spec("degree=1;angles=phi", names, inputs)
+
+    def sub(tr: Trajectory, measured: tuple[str, ...]) -> Trajectory:
+        u = np.column_stack([tr.u[:, 0], tr.x[:, 2]])
+        return Trajectory(tr.t, tr.x[:, [0, 1, 3, 4]], u, names, inputs, measured=measured)
+
+    held, _ = select_model([sub(tr, ()) for tr in other_clean], library, **FAST)
+    assert held.coefficients[2, held.feature_names.index("y_dot")] != 0
+    paths = [
+        str(write_trajectory_csv(tmp_path / f"f{i}.csv", sub(tr, ())))
+        for i, tr in enumerate(other_clean)
+    ]
+    out = tmp_path / "m.json"
+    args = ["identify", *paths, "--out", str(out), "--states", ",".join(names), "--inputs",
+            "u1,phi", "--measured", "phi", "--library", "degree=1;angles=phi"]  # fmt: skip
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    model = load_model(out)
+    assert model.meta["measured_inputs"] == ["phi"]
+    g, inv_m = 9.81, 1.0 / OTHER_PLANAR.mass
+    truth = {(0, "y_dot"): 1.0, (1, "z_dot"): 1.0, (2, "sin(phi) u1"): -inv_m,
+             (3, "1"): -g, (3, "cos(phi) u1"): inv_m}  # fmt: skip
+    found = {(i, model.feature_names[j]): model.coefficients[i, j]
+             for i, j in zip(*np.nonzero(model.coefficients), strict=True)}  # fmt: skip
+    assert set(found) == set(truth)
+    assert all(abs(found[k] / truth[k] - 1) < 1e-5 for k in truth)
+    with pytest.raises(ValueError, match=r"measured input\(s\) \['u2'\] are not inputs"):
+        sub(other_clean[0], ("u2",))
+
+
+def test_stage_inputs_hold_commands_and_follow_a_measured_cubic_on_jittery_steps():
+    rng = np.random.default_rng(1)
+    t = np.cumsum(rng.uniform(0.008, 0.012, 40))
+    cubic = 2.0 - t + 3.0 * t**2 - 5.0 * t**3
+    tr = Trajectory(t, np.sin(t)[:, None], np.column_stack([cubic, cubic]), ("x",),
+                    ("held", "signal"), measured=("signal",))  # fmt: skip
+    rows = np.arange(len(t) - 1)
+    u0, um, u1 = tr.stage_inputs(rows)
+    mid = 0.5 * (t[:-1] + t[1:])
+    assert np.array_equal(um[:, 0], cubic[:-1]) and np.array_equal(u1[:, 0], cubic[:-1])
+    exact = 2.0 - mid + 3.0 * mid**2 - 5.0 * mid**3
+    np.testing.assert_allclose(um[1:-1, 1], exact[1:-1], rtol=1e-12)  # cubic: exact inside
+    assert np.array_equal(u1[:, 1], cubic[1:])
+    plain = Trajectory(t, tr.x, tr.u, ("x",), ("held", "signal"))
+    a, b, c = plain.stage_inputs(rows)
+    assert a is b is c
+
+
 def test_load_data_names_the_file_that_is_too_short_or_logs_other_variables(other_clean, tmp_path):
     good = str(write_trajectory_csv(tmp_path / "good.csv", other_clean[0]))
     tr = other_clean[1]
