@@ -102,6 +102,11 @@ F_CRITICAL = 10.83
 refused when the residual grows by more than this many residual variances."""
 
 
+POOR_FIT = 0.5
+"""A chosen model whose held-out score is above this fraction of holding the state's is
+reported as a poor fit (a warning; the model is still returned)."""
+
+
 def standard_error(values: np.ndarray) -> float:
     """Standard error of the mean of ``values`` (0 for a single value)."""
     return float(values.std(ddof=1) / np.sqrt(values.size)) if values.size > 1 else 0.0
@@ -147,6 +152,8 @@ class SelectionReport:
         horizon: Prediction horizon [steps].
         rule: The selection rule, in words.
         warnings: Near-collinear pairs resolved, dropped terms, optimizer warnings.
+        hold: The score of holding the state (every derivative zero) on the same folds: the
+            yardstick a score is read against.
     """
 
     candidates: list[Candidate]
@@ -155,6 +162,7 @@ class SelectionReport:
     horizon: int
     rule: str
     warnings: list[str] = field(default_factory=list)
+    hold: float = float("nan")
 
     @property
     def best(self) -> Candidate:
@@ -171,6 +179,7 @@ class SelectionReport:
                 "chosen": {"window": self.best.window, "lambda": self.best.lam,
                            "n_terms": self.best.n_terms, "score": self.best.mean,
                            "se": self.best.se},
+                "hold_score": self.hold,
                 "candidates": [
                     {"window": c.window, "lambda": c.lam, "n_terms": c.n_terms,
                      "score": c.mean, "se": c.se}
@@ -818,6 +827,19 @@ def select_model(
         "residuals' long-run variance dropped"
     )
     report = SelectionReport(candidates, chosen, k, horizon, rule)
+    still = lambda x, u: np.zeros_like(x)  # noqa: E731
+    report.hold = float(np.mean([
+        prediction_score(still, [u for u, fo in zip(units, fold_of, strict=True) if fo == f],
+                         scale, horizon)
+        for f in range(k)
+    ]))  # fmt: skip
+    if best.mean > POOR_FIT * report.hold:
+        report.warnings.append(
+            f"the model predicts the held-out data {horizon} steps ahead with "
+            f"{best.mean / report.hold:.0%} of the error of holding the state ({best.mean:.3g} "
+            f"against {report.hold:.3g}): the library may lack the dynamics, or the inputs "
+            "may not explain the states"
+        )
 
     final_cfg = dataclasses.replace(base, lam=best.lam, window=best.window)
     used = long_enough(trajs, best.window)  # the segments this window's rows come from

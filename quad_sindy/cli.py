@@ -284,7 +284,9 @@ def identify(
                     typer.echo(library_note)
                 typer.echo(
                     f"selection: window {best.window}, lambda {best.lam:g}, {model.n_terms} "
-                    f"terms (score {best.mean:.3g} +- {best.se:.2g}; {report.folds} folds)"
+                    f"terms (score {best.mean:.3g} +- {best.se:.2g}, holding the state "
+                    f"{report.hold:.3g}: {report.horizon}-step prediction error over each "
+                    f"state's spread; {report.folds} folds)"
                 )
                 for note in report.warnings:
                     typer.echo(f"warning: {note}")
