@@ -8,6 +8,7 @@ Outputs are checked for writability before any long computation starts.
 from __future__ import annotations
 
 import os
+import re
 import sys
 from enum import Enum
 from pathlib import Path
@@ -160,6 +161,17 @@ def _shared_reference() -> Path | None:
     return None
 
 
+ANGLE_NAMES = ("phi", "theta", "psi", "roll", "pitch", "yaw", "heading", "angle", "attitude")
+"""Name parts that suggest an angle (a hint to declare it, nothing more)."""
+
+
+def _looks_like_angle(name: str) -> bool:
+    parts = re.split(r"[^a-z]+", name.lower())
+    return any(p in ANGLE_NAMES for p in parts) and not any(
+        p in ("dot", "rate", "d", "omega", "vel") for p in parts
+    )
+
+
 def _matching_vehicle(state_names: tuple[str, ...], input_names: tuple[str, ...]) -> str | None:
     """The registered vehicle with a library preset whose variables are exactly these."""
     from identification.libraries import PRESETS
@@ -262,6 +274,14 @@ def identify(
             lib = library_from_spec(
                 library or preset, first.state_names, first.input_names, declared
             )
+            looks = [n for n in first.state_names if _looks_like_angle(n)]
+            if looks and not declared and preset is None:
+                typer.echo(
+                    f"note: {', '.join(looks)} {'looks' if len(looks) == 1 else 'look'} like "
+                    f"angle{'s' if len(looks) > 1 else ''} but no angle is declared: "
+                    "angles enter only through sin and cos once declared (--angles, or angles= "
+                    "in --library)"
+                )
             if library is None and preset is None:
                 trig = (
                     f", sin and cos of {', '.join(declared)} alone and times each variable"

@@ -134,6 +134,10 @@ def test_cli_identify_any_names_and_show(tmp_path, other_clean):
     assert model.n_terms == 7
     raw = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"non-JSON {c}"))
     assert raw["inclusion_probability"] is not None and (tmp_path / "m.png").stat().st_size > 0
+    assert "like angle" not in result.output  # declared
+    bare = CliRunner().invoke(app, ["identify", *paths, "--out", str(tmp_path / "bare.json"),
+                                    "--inputs", "thrust,moment", "--lambda", "0.001"])  # fmt: skip
+    assert "note: roll looks like angle but no angle is declared" in bare.output
     shown = CliRunner().invoke(app, ["show", str(out)])
     assert shown.exit_code == 0 and "P=1.00" in shown.output and "selected:" in shown.output
     latex = CliRunner().invoke(app, ["show", str(out), "--latex"])
