@@ -438,6 +438,11 @@ def resolve_collinear(
 ) -> tuple[np.ndarray, dict[tuple[int, int, int], str]]:
     """Prefers the simpler term of each near-collinear pair the data cannot tell apart.
 
+    And the complex term where the data can: a simple term is exchanged for its complex
+    twin when that lowers the residual by more than the F-test's bar (p = 0.001), the same
+    rule the other way round (the greedy path and the growth usually get there first: no
+    run of the planar and 6-DOF noise sweeps changed).
+
     Returns:
         The coefficients (refitted where changed) and a warning per resolved pair, keyed by
         (equation, simple column, complex column).
@@ -454,6 +459,16 @@ def resolve_collinear(
         # add up to a support the data reject (four twins in x', 16 variances)
         rss, sigma2 = _residual_variance(gram, i, support) if support else (0.0, 0.0)
         for simple, complex_, cosine in pairs:
+            if simple in support and complex_ not in support:
+                trial = sorted(complex_ if c == simple else c for c in support)
+                if rss - _rss(a, z[:, i], trial)[0] > F_CRITICAL * sigma2:
+                    support = trial
+                    notes[i, simple, complex_] = (
+                        f"{state}': kept {_term_list(feature_names, [complex_])} in place of "
+                        f"its nearly collinear {_term_list(feature_names, [simple])} (|cos| = "
+                        f"{cosine:.6f}): the data prefer it beyond the F-test's bar"
+                    )
+                continue
             if complex_ not in support:
                 continue
             trial = [c for c in support if c != complex_]
@@ -682,14 +697,14 @@ def indistinguishable_twins(
                     continue
                 trial = [other if c == kept else c for c in support]
                 change = _rss(a, z[:, i], trial)[0] - rss
-                if change <= F_CRITICAL * sigma2:
+                if abs(change) <= F_CRITICAL * sigma2:  # neither fits significantly better
                     groups.setdefault((i, kept), []).append(
                         (other, change / max(sigma2, 1e-300), cosine)
                     )
                     covered.add((i, simple, complex_))  # fmt: skip
     notes = []
     for (i, kept), others in groups.items():
-        listed = ", ".join(f"{_term_list(feature_names, [o])} ({c:.2g})" for o, c, _ in others)
+        listed = ", ".join(f"{_term_list(feature_names, [o])} ({c:.3g})" for o, c, _ in others)
         notes.append(
             f"{state_names[i]}': kept {_term_list(feature_names, [kept])}; its nearly collinear "
             f"twin{'s' if len(others) > 1 else ''} on this data fit it equally well: {listed} "

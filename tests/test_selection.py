@@ -874,6 +874,27 @@ def test_simpler_twins_are_taken_only_while_the_swaps_together_pass_the_f_test()
     assert list(np.flatnonzero(out[0])) == [0, 3] and len(notes) == 1
 
 
+def test_a_simple_twin_gives_way_to_a_complex_one_the_data_prefer_past_the_f_test():
+    """The fit holds `u1`, the data were made by its twin `cos(phi) u1` (|cos| = 0.9998),
+    which fits about 57 residual variances better: exchanged, and not reported as a twin
+    that fits equally well (before, any twin that fit better was reported so)."""
+    from identification.fit import Gram
+    from identification.selection import indistinguishable_twins, resolve_collinear
+
+    rng = np.random.default_rng(1)
+    b1, d1, noise = rng.normal(size=(3, 4000))
+    theta = np.column_stack([b1, b1 + 0.02 * d1])
+    y = 0.3 * theta[:, 1] + 0.05 * noise
+    gram = Gram.from_rows(theta, y[:, None])
+    xi = np.array([[0.3, 0.0]])
+    names = ["u1", "cos(phi) u1"]
+    notes, _ = indistinguishable_twins(xi, gram, names, ["s"], 1)
+    assert notes == []
+    out, resolved = resolve_collinear(xi, gram, names, ["s"], 1)
+    assert list(np.flatnonzero(out[0])) == [1] and abs(out[0, 1] / 0.3 - 1) < 1e-2
+    assert "kept 'cos(phi) u1' in place of" in resolved[0, 0, 1]
+
+
 def test_growth_takes_the_complex_twins_the_data_prefer_together():
     """Both chosen terms are the simpler twins of the true ones; the best support of the same
     size (the complex pair) fits 15 residual variances better, past the F-test: taken."""
