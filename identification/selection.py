@@ -1035,4 +1035,4 @@ def _bootstrap(
                 f"a near twin of {names[j]!r} in its place ({', '.join(map(repr, kept))}; "
                 "|cos| > 0.999 on this data); its spread is over that shared direction"
             )
-    return xi, bag_spread(shown, xi), prob, notes
+    return xi, bag_spread(shown, xi_in), prob, notes  # about the fit the bags resample
