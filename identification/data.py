@@ -642,7 +642,7 @@ def read_table(path: str | Path, columns: Sequence[str] | None = None) -> dict[s
     for name in table.column_names:
         column = table.column(name)
         scale = 1.0
-        if pa.types.is_timestamp(column.type):  # seconds since the first, exact in int64
+        if pa.types.is_timestamp(column.type):  # seconds since the earliest, exact in int64
             ns = column.cast(pa.timestamp("ns")).cast(pa.int64())
             column, scale = pc.subtract(ns, pc.min(ns)), 1e-9
         try:
