@@ -66,8 +66,9 @@ class MBRLConfig:
         ensemble_mode: ``median`` or ``sample`` (a member per imagined episode).
         disagreement: Truncate imagined episodes whose one-step member spread (in units of
             each state's standard deviation in the data) exceeds this (None: never).
-        env_options: Options of the ground truth only (vehicle parameters, effects): the
-            surrogate gets the task options, never the truth's physics.
+        env_options: Options of the ground truth (vehicle, params, effects). The surrogate
+            gets the task options and the vehicle's (its action limits and trim: the model
+            is its only physics), never the effects.
     """
 
     env_id: str = "PlanarQuad-v0"
@@ -106,8 +107,9 @@ class MBRLConfig:
 
     @property
     def surrogate_kwargs(self) -> dict[str, Any]:
-        """Options of the surrogate env: the task only."""
-        return task_kwargs(self.task)
+        """Options of the surrogate env: the task and the vehicle's limits (not the effects)."""
+        vehicle = {k: v for k, v in self.env_options.items() if k in ("vehicle", "params")}
+        return task_kwargs(self.task, **vehicle)
 
 
 def _collect(config: MBRLConfig, policy: Any, steps: int, seed: int) -> list[Trajectory]:

@@ -90,12 +90,28 @@ def load_agent(path: str | Path, algo: str | None = None) -> Any:
     return quiet_logger((PPO if found == "ppo" else SAC).load(path, device="cpu"))
 
 
+def make_env(env_id: str, **env_kwargs: Any) -> gym.Env:
+    """``gym.make`` for a quadrotor env or surrogate, with a one-line error for any other id.
+
+    The tasks' options (normalised actions, a reference) are quadrotor-env options: another
+    env (``CartPole-v1``) ended in a TypeError traceback.
+    """
+    try:
+        return gym.make(env_id, **env_kwargs)
+    except TypeError:
+        raise ValueError(
+            f"{env_id} does not take the task's options ({', '.join(env_kwargs)}): train and "
+            "evaluate fly the quadrotor envs and their surrogates (PlanarQuad-v0, "
+            "Quad6DOF-v0, PlanarQuadSINDy-v0, ...)"
+        ) from None
+
+
 def evaluate(
     policy: Any, env_id: str, episodes: int = 5, seed: int = 10_000, **env_kwargs: Any
 ) -> tuple[float, float]:
     """Mean and std of the return of ``policy(obs, info)`` over seeded episodes."""
     _positive(episodes=episodes)
-    env = gym.make(env_id, **env_kwargs)
+    env = make_env(env_id, **env_kwargs)
     returns = []
     for ep in range(episodes):
         obs, info = env.reset(seed=seed + ep)
@@ -135,9 +151,9 @@ def train(
 
     _positive(steps=steps, eval_every=eval_every, eval_episodes=eval_episodes)
     kwargs = task_kwargs(task, **(env_kwargs or {}))
+    env = make_env(env_id, **kwargs)  # before the output folder: a bad id leaves nothing
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    env = gym.make(env_id, **kwargs)
     model = make_algo(algo, env, seed)
     curve: list[tuple[int, float, float]] = []
 

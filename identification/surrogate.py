@@ -48,7 +48,8 @@ def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: b
     if (model.state_names, model.input_names) != (vehicle.state_names, vehicle.input_names):
         raise ValueError(
             f"model variables {model.state_names} / {model.input_names} do not match {base_id}'s "
-            f"{vehicle.state_names} / {vehicle.input_names}"
+            f"{vehicle.state_names} / {vehicle.input_names}: a surrogate steps its vehicle's "
+            "variables, so identify from a log with those names (--columns renames a CSV's)"
         )
     return model, cls
 
@@ -85,6 +86,41 @@ def surrogate_rhs(model: IdentifiedModel, cls: Any, compiled: bool = True) -> An
     return rhs
 
 
+HOVER_MISMATCH = 1.0
+"""Largest acceleration [m/s^2 or rad/s^2] the model may predict at rest under the env
+vehicle's hover input before :func:`check_vehicle` warns."""
+
+
+def check_vehicle(model: IdentifiedModel, vehicle: Any) -> str | None:
+    """A warning when the env's vehicle cannot be the model's: the model does not hover at it.
+
+    The surrogate takes its action limits, saturation and hover trim from the env's vehicle
+    parameters (``params`` / ``vehicle``; the paper vehicle by default), the model only its
+    vector field. A model of another vehicle flown there falls at full thrust or cannot be
+    held (a 0.6 kg model in the paper vehicle's 3.5 N box trained an agent on a vehicle that
+    cannot fly, exit 0). At rest, under the vehicle's hover input (weight as thrust, no
+    moments), the model's accelerations should vanish.
+    """
+    hover = np.zeros(len(model.input_names))
+    hover[0] = float(vehicle.params.hover_thrust)
+    accel = np.asarray(model.rhs(np.zeros((1, len(model.state_names))), hover[None, :]))[0]
+    worst = int(np.argmax(np.abs(accel)))
+    if not abs(accel[worst]) > HOVER_MISMATCH:
+        return None
+    return (
+        f"the model does not hover at this env's vehicle: at rest under its hover thrust "
+        f"{hover[0]:.3g} N it predicts {model.state_names[worst]}' = {accel[worst]:.3g}; set the "
+        "env's vehicle to the model's (params={'mass': ...} or vehicle=..., --param/--vehicle "
+        "on the command line): its action limits and trim are the env's"
+    )
+
+
+def _warn_vehicle(model: IdentifiedModel, env: Any) -> None:
+    problem = check_vehicle(model, env.vehicle)
+    if problem:
+        warnings.warn(problem, RuntimeWarning, stacklevel=3)
+
+
 def make_surrogate(
     model: IdentifiedModel | str | Path | None = None,
     base_id: str = "PlanarQuad-v0",
@@ -99,6 +135,7 @@ def make_surrogate(
     model, cls = _resolve(model, base_id, vector=False)
     env = cls(rhs=surrogate_rhs(model, cls, compiled), **kwargs)
     env.model = model
+    _warn_vehicle(model, env)
     return env
 
 
@@ -113,6 +150,7 @@ def make_surrogate_vector(
     model, cls = _resolve(model, base_id, vector=True)
     env = cls(num_envs=num_envs, rhs=surrogate_rhs(model, cls, compiled), **kwargs)
     env.model = model
+    _warn_vehicle(model, env)
     return env
 
 

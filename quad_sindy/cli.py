@@ -69,6 +69,30 @@ def _root(
     """Gymnasium quadrotor environments and SINDy identification from data."""
 
 
+VehicleOption = Annotated[
+    str | None,
+    typer.Option(help="vehicle preset of the env: paper (default), crazyflie or pelican"),
+]
+ParamOption = Annotated[
+    list[str] | None,
+    typer.Option(help="NAME=VALUE: set one vehicle parameter of the env (repeat; e.g. mass=0.6)"),
+]
+
+
+def _vehicle_options(vehicle: str | None, param: list[str] | None) -> dict[str, object]:
+    """Env options for ``--vehicle`` and ``--param`` (the vehicle a model was identified on)."""
+    options: dict[str, object] = {"vehicle": vehicle} if vehicle else {}
+    changes = {}
+    for item in param or []:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip() or not value.strip():
+            _fail(f"--param takes NAME=VALUE, got {item!r}")
+        changes[name.strip()] = value.strip()
+    if changes:
+        options["params"] = changes
+    return options
+
+
 @app.command()
 def simulate(
     out: Annotated[Path, typer.Option(help="CSV file to write")],
@@ -103,12 +127,7 @@ def simulate(
             if system.value not in ("planar", "quad6dof"):
                 _fail(f"--vehicle presets are for planar and quad6dof, not {system.value}")
             veh = veh.with_params(get_preset(vehicle, system.value))
-        changes = {}
-        for item in param or []:
-            name, sep, value = item.partition("=")
-            if not sep or not name.strip() or not value.strip():
-                _fail(f"--param takes NAME=VALUE, got {item!r}")
-            changes[name.strip()] = value.strip()
+        changes = _vehicle_options(None, param).get("params")
         if changes:
             veh = veh.with_params(with_changes(veh.params, changes))
         run = simulate_case(case, veh, dt=dt, duration=duration)
@@ -192,7 +211,9 @@ def identify(
     system: Annotated[
         SystemName | None, typer.Option(help="preset vehicle: its variable names and library")
     ] = None,
-    columns: Annotated[str | None, typer.Option(help="names of a headerless CSV's columns")] = None,
+    columns: Annotated[
+        str | None, typer.Option(help="names of a CSV's columns in order (replaces its header)")
+    ] = None,
     time: Annotated[str, typer.Option(help="time column [s]")] = "t",
     states: Annotated[str | None, typer.Option(help="state columns, comma-separated")] = None,
     inputs: Annotated[str | None, typer.Option(help="input columns, comma-separated")] = None,
@@ -407,20 +428,28 @@ def compare(
     case: Annotated[str, typer.Option(help="reference: A, B, C or a trajectory name")] = "A",
     seed: Annotated[int, typer.Option(help="reset seed")] = 0,
     tolerance: Annotated[float, typer.Option(help="state gap that counts as parting")] = 1e-3,
+    vehicle: VehicleOption = None,
+    param: ParamOption = None,
 ) -> None:
-    """The same policy and initial state in the ground truth and in the surrogate."""
+    """The same policy and initial state in the ground truth and in the surrogate.
+
+    Both fly the env's vehicle (``--vehicle``, ``--param``; the paper vehicle by default):
+    set it to the vehicle the model was identified on.
+    """
     from agents.policies import make_policy
     from identification.experiments.compare import compare_envs, write_comparison
     from identification.model import load_model
 
     try:
         identified = load_model(model)
-        make_policy(policy.value, env, seed=seed)  # validates the names before flying
+        options = _vehicle_options(vehicle, param)
+        make_policy(policy.value, env, seed=seed, **options)  # validates names before flying
 
         def factory() -> object:
-            return make_policy(policy.value, env, seed=seed)
+            return make_policy(policy.value, env, seed=seed, **options)
 
-        comp = compare_envs(identified, env, factory, case, seed, tolerance=tolerance)
+        comp = compare_envs(identified, env, factory, case, seed, tolerance=tolerance,
+                            env_kwargs=options)  # fmt: skip
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc))
     summary = write_comparison(comp, out)
@@ -450,14 +479,19 @@ def train_cmd(
     eval_every: Annotated[int, typer.Option(help="evaluate every N steps")] = 10_000,
     model: Annotated[Path | None, typer.Option(help="model JSON for surrogate ids")] = None,
     task: Annotated[str, typer.Option(help="hover | figure8 | random")] = "hover",
+    vehicle: VehicleOption = None,
+    param: ParamOption = None,
 ) -> None:
-    """Trains PPO or SAC on a task (progress bar, periodic evaluation, curve, model)."""
+    """Trains PPO or SAC on a task (progress bar, periodic evaluation, curve, model).
+
+    A surrogate flies with the env's vehicle limits (``--vehicle``, ``--param``).
+    """
     from agents.train import train
 
     if steps < 1 or eval_every < 1:
         _fail(f"--steps and --eval-every must be positive, got {steps} and {eval_every}")
     _writable_folder(out)
-    kwargs = {"model": str(model)} if model else {}
+    kwargs = {**({"model": str(model)} if model else {}), **_vehicle_options(vehicle, param)}
     result = train(env, algo.value, steps, out, seed, eval_every, env_kwargs=kwargs, task=task)
     typer.echo(
         f"final return {result['final_return']:.1f} +- {result['final_std']:.1f}; "
@@ -475,6 +509,8 @@ def evaluate_cmd(
     episodes: Annotated[int, typer.Option(help="episodes")] = 10,
     model: Annotated[Path | None, typer.Option(help="model JSON for surrogate ids")] = None,
     task: Annotated[str, typer.Option(help="hover | figure8 | random")] = "hover",
+    vehicle: VehicleOption = None,
+    param: ParamOption = None,
 ) -> None:
     """Mean return of a trained agent on a task (ground truth or a surrogate)."""
     from agents.policies import SB3Policy
@@ -484,7 +520,9 @@ def evaluate_cmd(
     if episodes < 1:
         _fail(f"--episodes must be positive, got {episodes}")
     loaded = load_agent(agent, algo.value if algo else None)
-    kwargs = task_kwargs(task, **({"model": str(model)} if model else {}))
+    kwargs = task_kwargs(
+        task, **({"model": str(model)} if model else {}), **_vehicle_options(vehicle, param)
+    )
     mean, std = evaluate(SB3Policy(loaded), env, episodes, **kwargs)
     typer.echo(f"return {mean:.1f} +- {std:.1f} over {episodes} episodes")
 
@@ -523,16 +561,19 @@ def mbrl(
         str | None,
         typer.Option(help="effects of the ground truth only, e.g. drag or drag,wind or all"),
     ] = None,
+    vehicle: VehicleOption = None,
+    param: ParamOption = None,
 ) -> None:
     """SINDy model-based RL against model-free RL over seeds (mean and 95 % intervals)."""
     import gymnasium as gym
 
     from agents.mbrl import MBRLConfig, run_experiment
 
-    env_options = {}
+    env_options: dict[str, object] = _vehicle_options(vehicle, param)
     if effects:
         names = [e.strip() for e in effects.split(",") if e.strip()]
         env_options["effects"] = "all" if names == ["all"] else names
+    if env_options:
         try:
             gym.make(env, **env_options).close()
         except (ValueError, gym.error.Error) as exc:
@@ -551,18 +592,18 @@ def mbrl(
     typer.echo(f"model-free final return: {_fmt_interval(summary['model_free_final_return'])}")
     typer.echo(f"SINDy best return:       {_fmt_interval(summary['sindy_best_return'])}")
     typer.echo(
-        f"fewer real steps to 95 % of model-free: {_fmt_interval(eff)}x "
+        f"fewer real steps to 95 % of model-free: {_fmt_interval(eff, 'x')} "
         f"({summary['reached']} of {summary['reached'] + summary['missed']} seeds reached it)"
     )
     typer.echo(f"wrote {out}/mbrl.json and {out}/mbrl.png")
 
 
-def _fmt_interval(stats: dict) -> str:
+def _fmt_interval(stats: dict, unit: str = "") -> str:
     if stats["mean"] is None:
         return "n/a"
     if stats["low"] is None:
-        return f"{stats['mean']:.3g}"
-    return f"{stats['mean']:.3g} [{stats['low']:.3g}, {stats['high']:.3g}]"
+        return f"{stats['mean']:.3g}{unit}"
+    return f"{stats['mean']:.3g}{unit} [{stats['low']:.3g}, {stats['high']:.3g}]"
 
 
 @app.command()
@@ -586,10 +627,18 @@ The library raises ``ValueError`` naming the problem; the others come from unrea
 Programming errors (TypeError, AttributeError, ...) keep their traceback."""
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    """Warnings on the command line: one ``warning: ...`` line, no source location."""
+    typer.secho(f"warning: {str(message).strip()}", fg=typer.colors.YELLOW, err=True)
+
+
 def main() -> None:
     """Console entry point: runs the command, reporting a user's mistake in one line."""
+    import warnings
+
     import gymnasium as gym
 
+    warnings.showwarning = _one_line_warning
     try:
         app()
     except (*USER_ERRORS, gym.error.Error) as exc:

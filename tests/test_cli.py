@@ -206,3 +206,13 @@ def test_identify_takes_the_time_column_a_log_names(monkeypatch, capsys, tmp_pat
         models.append(load_model(out))
     assert "time" not in models[1].state_names
     np.testing.assert_array_equal(models[0].coefficients, models[1].coefficients)
+
+
+def test_training_on_an_env_that_is_not_a_quadrotor_is_one_line_and_leaves_no_folder(
+    monkeypatch, capsys, tmp_path
+):
+    out = tmp_path / "run"
+    code, _, err = run_cli(monkeypatch, capsys, "train", "--env", "CartPole-v1", "--steps", "10",
+                           "--eval-every", "10", "--out", str(out))  # fmt: skip
+    assert_one_line_error(code, err, "CartPole-v1 does not take the task's options")
+    assert not out.exists()

@@ -131,6 +131,10 @@ def test_cli_effects_act_on_the_ground_truth_only(tmp_path):
     assert len(bad.output.strip().splitlines()) == 1
     config = dataclasses.replace(TINY, env_options={"effects": ["drag"]})
     assert config.truth_kwargs["effects"] == ["drag"] and "effects" not in config.surrogate_kwargs
+    # the vehicle (its action limits and trim) is the surrogate's too; the effects are not
+    other = dataclasses.replace(TINY, env_options={"effects": ["drag"], "params": {"mass": "0.5"}})
+    assert other.surrogate_kwargs["params"] == {"mass": "0.5"}
+    assert "effects" not in other.surrogate_kwargs
     truth = gym.make("PlanarQuad-v0", **config.truth_kwargs)
     assert truth.unwrapped.effects.drag
 

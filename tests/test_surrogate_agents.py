@@ -1,3 +1,4 @@
+import sys
 import warnings
 
 import gymnasium as gym
@@ -169,3 +170,37 @@ def test_surrogates_step_the_compiled_model_and_fall_back_with_a_warning(monkeyp
     assert not isinstance(env.unwrapped._rhs, CompiledRhs)
     env.reset(seed=0)
     env.step(env.action_space.sample())
+
+
+def test_a_surrogate_of_another_vehicle_warns_on_the_paper_vehicle_and_flies_on_its_own(
+    tmp_path, monkeypatch, capsys
+):
+    """The surrogate takes its action limits and trim from the env's vehicle. A 0.5 kg model
+    in the paper vehicle's env cannot hover (a new user trained an agent on it, exit 0): a
+    warning says so; with the model's vehicle (``params``, or ``--param`` on the command
+    line) the surrogate and the truth are the same flight."""
+    from identification.experiments.synthetic import OTHER_PLANAR, truth_planar
+    from identification.experiments.truth import truth_matrix
+    from identification.libraries import planar_library
+    from quad_sindy import cli
+
+    names = planar_library()
+    veh = quad_envs.vehicles.get_vehicle("planar")
+    xi = truth_matrix(truth_planar(OTHER_PLANAR), veh.state_names, names)
+    model = IdentifiedModel(names, xi, veh.state_names, veh.input_names, "planar", {})
+    with pytest.warns(RuntimeWarning, match="does not hover at this env's vehicle"):
+        make_surrogate(model, "PlanarQuad-v0", compiled=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        make_surrogate(model, "PlanarQuad-v0", compiled=False, params=OTHER_PLANAR)
+    changes = {"mass": "0.5", "Ixx": "3e-3", "arm_length": "0.15", "rotor_force_max": "4.905"}
+    env = gym.make("PlanarQuad-v0", params=changes)
+    assert env.unwrapped.params == OTHER_PLANAR
+    path = model.save(tmp_path / "m.json")
+    param = [a for k, v in changes.items() for a in ("--param", f"{k}={v}")]
+    monkeypatch.setattr(sys, "argv", ["quad-sindy", "compare", "--model", str(path), "--out",
+                                      str(tmp_path / "cmp"), *param])  # fmt: skip
+    with pytest.raises(SystemExit) as code:
+        cli.main()
+    out, err = capsys.readouterr()
+    assert code.value.code == 0 and "parted by > 0.001: never" in out and "warning" not in err

@@ -78,7 +78,10 @@ def compare_envs(
     n = min(len(truth), len(surrogate))
     padded = np.full_like(truth, np.nan)
     padded[:n] = surrogate[:n]
-    gap = np.nanmax(np.abs(padded - truth), axis=1)
+    diff = np.abs(padded - truth)  # rows after the surrogate's episode ended: NaN (parted)
+    gap = np.where(
+        np.isnan(diff).all(axis=1), np.nan, np.nanmax(np.nan_to_num(diff, nan=-1.0), axis=1)
+    )
     parted = np.flatnonzero(~(gap <= tolerance))
     dt = truth_env.unwrapped.dt
     return EnvComparison(

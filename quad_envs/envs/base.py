@@ -13,6 +13,7 @@ same class with the vector field replaced by an identified model's ``rhs`` (a Py
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -24,7 +25,7 @@ from gymnasium.vector.utils import batch_space
 
 from quad_envs import physics
 from quad_envs.integrators import Rhs, rk4_step
-from quad_envs.params import PRESETS, get_preset
+from quad_envs.params import PRESETS, get_preset, with_changes
 from quad_envs.tasks import FlightVolume
 from quad_envs.trajectories import RandomWaypoints, Reference, make_trajectory
 from quad_envs.types import FloatArray
@@ -52,7 +53,8 @@ class EnvConfig:
         param_randomization: Fractional uniform perturbation per episode of the vehicle's
             randomised parameters (mass, inertia, rotor time constant, thrust coefficient,
             drag coefficients).
-        params: Vehicle parameters (overrides ``vehicle``).
+        params: Vehicle parameters (overrides ``vehicle``), or a mapping of changes to the
+            ``vehicle`` preset's (``{"mass": 0.6, "Ixx": 4e-3}``; the CLI's ``--param``).
         volume: Flight volume and attitude limits for termination.
         vehicle: Parameter preset: ``paper`` (default), ``crazyflie`` or ``pelican``
             (:data:`quad_envs.params.PRESETS`).
@@ -154,8 +156,9 @@ class _EnvCore:
         self.param_randomization = float(config.param_randomization)
         self.action_mode = config.action_mode
         params = config.params
-        if params is None:
-            params = get_preset(config.vehicle, self.vehicle.name)
+        if params is None or isinstance(params, Mapping):
+            preset = get_preset(config.vehicle, self.vehicle.name)
+            params = with_changes(preset, params) if params else preset
         self.vehicle = self.vehicle.with_params(params)
         self.params = params
         veh = self.vehicle
