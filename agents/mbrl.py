@@ -162,8 +162,13 @@ def _state_scale(data: list[Trajectory]) -> np.ndarray:
     return np.where(scale > 0, scale, 1.0)
 
 
-def sindy_job(config: MBRLConfig, seed: int) -> dict[str, Any]:
-    """One seed of the SINDy model-based loop; returns its learning curve over real steps."""
+def sindy_job(config: MBRLConfig, seed: int, out: str | None = None) -> dict[str, Any]:
+    """One seed of the SINDy model-based loop; returns its learning curve over real steps.
+
+    With ``out``, the last iteration's identified model(s) and the agent trained on them are
+    kept in ``out/sindy_seed{seed}/`` (``model.json`` or ``model_K.json``, ``agent.zip``):
+    the surrogate and the policy can be reused, as the baseline's ``model.zip`` can.
+    """
     import torch
 
     torch.set_num_threads(1)  # same floating-point results in process and on Ray workers
@@ -209,6 +214,12 @@ def sindy_job(config: MBRLConfig, seed: int) -> dict[str, Any]:
             new = _collect(config, policy, steps, collect_seed)
             data += new
             real_steps += sum(len(t) - 1 for t in new)
+    if out is not None:
+        folder = Path(out) / f"sindy_seed{seed}"
+        folder.mkdir(parents=True, exist_ok=True)
+        for k, member in enumerate(models):
+            member.save(folder / ("model.json" if len(models) == 1 else f"model_{k}.json"))
+        agent.save(folder / "agent.zip")
     return {"method": "sindy", "seed": seed, "curve": curve}
 
 
@@ -238,7 +249,7 @@ def run_job(method: str, config: MBRLConfig, seed: int, out: str) -> dict[str, A
 
     with threadpool_limits(limits=1):
         if method == "sindy":
-            return sindy_job(config, seed)
+            return sindy_job(config, seed, out)
         return model_free_job(config, seed, out)
 
 

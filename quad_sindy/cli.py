@@ -412,6 +412,17 @@ def bench_surrogate_cmd(
         typer.echo(f"{row['env']:<36} {rate:>10} {row['ratio']:>8.2f}")
 
 
+def _check_model_option(env: str, model: Path | None) -> None:
+    """``--model`` belongs to a surrogate id, and a surrogate id needs it."""
+    from identification import SURROGATE_IDS
+
+    surrogates = (*SURROGATE_IDS, "CrazyflieSINDy-v0")
+    if model is not None and env not in surrogates:
+        _fail(f"--model is for the surrogate ids ({', '.join(surrogates)}), not {env}")
+    if model is None and env in surrogates:
+        _fail(f"{env} is a surrogate: name its model with --model MODEL.json")
+
+
 class PolicyName(str, Enum):
     """Policies for ``compare``."""
 
@@ -490,6 +501,7 @@ def train_cmd(
 
     if steps < 1 or eval_every < 1:
         _fail(f"--steps and --eval-every must be positive, got {steps} and {eval_every}")
+    _check_model_option(env, model)
     _writable_folder(out)
     kwargs = {**({"model": str(model)} if model else {}), **_vehicle_options(vehicle, param)}
     result = train(env, algo.value, steps, out, seed, eval_every, env_kwargs=kwargs, task=task)
@@ -519,6 +531,7 @@ def evaluate_cmd(
 
     if episodes < 1:
         _fail(f"--episodes must be positive, got {episodes}")
+    _check_model_option(env, model)
     loaded = load_agent(agent, algo.value if algo else None)
     kwargs = task_kwargs(
         task, **({"model": str(model)} if model else {}), **_vehicle_options(vehicle, param)
@@ -643,6 +656,7 @@ def main() -> None:
         app()
     except (*USER_ERRORS, gym.error.Error) as exc:
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        message = message.removeprefix("Error: ")  # stable-baselines3's own prefix
         if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
             message = f"{exc.filename}: {exc.strerror}"
         elif isinstance(exc, UnicodeDecodeError):

@@ -216,3 +216,12 @@ def test_training_on_an_env_that_is_not_a_quadrotor_is_one_line_and_leaves_no_fo
                            "--eval-every", "10", "--out", str(out))  # fmt: skip
     assert_one_line_error(code, err, "CartPole-v1 does not take the task's options")
     assert not out.exists()
+
+
+def test_a_model_option_belongs_to_a_surrogate_id(monkeypatch, capsys, tmp_path):
+    code, _, err = run_cli(monkeypatch, capsys, "train", "--env", "PlanarQuad-v0", "--model",
+                           "m.json", "--out", str(tmp_path / "a"))  # fmt: skip
+    assert_one_line_error(code, err, "--model is for the surrogate ids", "not PlanarQuad-v0")
+    code, _, err = run_cli(monkeypatch, capsys, "train", "--env", "PlanarQuadSINDy-v0", "--out",
+                           str(tmp_path / "b"))  # fmt: skip
+    assert_one_line_error(code, err, "PlanarQuadSINDy-v0 is a surrogate")

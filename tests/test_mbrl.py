@@ -53,6 +53,11 @@ def test_experiment_runs_saves_each_job_and_resumes(tmp_path):
     real = [p["real_steps"] for p in saved["runs"]["sindy"]["0"]["curve"]]
     assert real[0] >= TINY.initial_real_steps and real[1] >= real[0] + 200
     assert (tmp_path / "mbrl.png").stat().st_size > 0
+    # the loop's last surrogate and agent are kept, as the baseline's agent is
+    kept = next(tmp_path.rglob("sindy_seed0"))
+    from identification.model import load_model
+
+    assert load_model(kept / "model.json").n_terms > 0 and (kept / "agent.zip").stat().st_size
     messages.clear()
     again = run_experiment(TINY, tmp_path, seeds=2, echo=messages.append)
     assert messages[0].startswith("0 jobs to run, 4 loaded")
