@@ -581,7 +581,13 @@ def mbrl(
     import gymnasium as gym
 
     from agents.mbrl import MBRLConfig, run_experiment
+    from agents.parallel import ray_available
+    from identification import SURROGATE_IDS
 
+    if env in (*SURROGATE_IDS, "CrazyflieSINDy-v0"):
+        _fail(f"--env is the ground truth the loop learns from (PlanarQuad-v0, ...), not {env}")
+    if (workers > 1 or address) and not ray_available():
+        _fail("parallel runs need Ray: pip install 'quad-sindy[ray]' (or --workers 1)")
     env_options: dict[str, object] = _vehicle_options(vehicle, param)
     if effects:
         names = [e.strip() for e in effects.split(",") if e.strip()]

@@ -225,3 +225,13 @@ def test_a_model_option_belongs_to_a_surrogate_id(monkeypatch, capsys, tmp_path)
     code, _, err = run_cli(monkeypatch, capsys, "train", "--env", "PlanarQuadSINDy-v0", "--out",
                            str(tmp_path / "b"))  # fmt: skip
     assert_one_line_error(code, err, "PlanarQuadSINDy-v0 is a surrogate")
+
+
+def test_mbrl_refuses_a_surrogate_as_ground_truth_before_writing_anything(
+    monkeypatch, capsys, tmp_path
+):
+    out = tmp_path / "mbrl"
+    code, _, err = run_cli(monkeypatch, capsys, "mbrl", "--env", "Quad6DOFSINDy-v0", "--out",
+                           str(out))  # fmt: skip
+    assert_one_line_error(code, err, "--env is the ground truth", "not Quad6DOFSINDy-v0")
+    assert not out.exists()
