@@ -135,34 +135,14 @@ class Trajectory:
         """The inputs at the start, middle and end of the steps that start at ``rows``.
 
         A held input keeps its row's value over the step (the same array is returned three
-        times when every input is held). A :attr:`measured` input is the next row's sample
-        at the end, and at the middle the cubic through the four nearest samples (each row's
-        own time; linear next to either end): fourth order, as RK4 is in the states.
+        times when every input is held); a :attr:`measured` one follows
+        :func:`stage_inputs`.
 
         Args:
             rows: Row indices, each below ``len(self) - 1``.
         """
-        u0 = self.u[rows]
-        if not self.measured:
-            return u0, u0, u0
         cols = [self.input_names.index(n) for n in self.measured]
-        um, u1 = u0.copy(), u0.copy()
-        u1[:, cols] = self.u[rows + 1][:, cols]
-        um[:, cols] = 0.5 * (u0[:, cols] + u1[:, cols])
-        inner = np.flatnonzero((rows >= 1) & (rows + 2 < len(self)))
-        if inner.size:
-            r = rows[inner]
-            nodes = np.stack([self.t[r + j] for j in (-1, 0, 1, 2)], axis=1)
-            mid = 0.5 * (self.t[r] + self.t[r + 1])
-            value = np.zeros((r.size, len(cols)))
-            for j in range(4):  # Lagrange weights at the midpoint
-                weight = np.ones(r.size)
-                for m in range(4):
-                    if m != j:
-                        weight *= (mid - nodes[:, m]) / (nodes[:, j] - nodes[:, m])
-                value += weight[:, None] * self.u[r + j - 1][:, cols]
-            um[np.ix_(inner, cols)] = value
-        return u0, um, u1
+        return stage_inputs(self.t, self.u, rows, cols)
 
     @classmethod
     def from_run(cls, run: Any, inputs: str = "applied", **meta: Any) -> Trajectory:
@@ -175,6 +155,39 @@ class Trajectory:
         owner = getattr(run, "vehicle", None) or run.system
         names = (owner.state_names, owner.input_names)
         return cls(run.t, run.states, u, *names, refs=run.refs, meta=meta)
+
+
+def stage_inputs(
+    t: np.ndarray, u: np.ndarray, rows: np.ndarray, measured: Sequence[int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inputs at the start, middle and end of the steps that start at ``rows`` of (t, u).
+
+    Columns not in ``measured`` are held over the step (the same array is returned three
+    times when none is measured). A measured column is the next sample at the end, and at the
+    middle the cubic through the four nearest samples (their own times; linear next to
+    either end): fourth order, as RK4 is in the states.
+    """
+    u0 = u[rows]
+    if not measured:
+        return u0, u0, u0
+    cols = list(measured)
+    um, u1 = u0.copy(), u0.copy()
+    u1[:, cols] = u[rows + 1][:, cols]
+    um[:, cols] = 0.5 * (u0[:, cols] + u1[:, cols])
+    inner = np.flatnonzero((rows >= 1) & (rows + 2 < len(t)))
+    if inner.size:
+        r = rows[inner]
+        nodes = np.stack([t[r + j] for j in (-1, 0, 1, 2)], axis=1)
+        mid = 0.5 * (t[r] + t[r + 1])
+        value = np.zeros((r.size, len(cols)))
+        for j in range(4):  # Lagrange weights at the midpoint
+            weight = np.ones(r.size)
+            for m in range(4):
+                if m != j:
+                    weight *= (mid - nodes[:, m]) / (nodes[:, j] - nodes[:, m])
+            value += weight[:, None] * u[r + j - 1][:, cols]
+        um[np.ix_(inner, cols)] = value
+    return u0, um, u1
 
 
 def validate(traj: Trajectory) -> None:

@@ -273,7 +273,10 @@ def rk4_steps(
         return u0 + tau * (4 * um - 3 * u0 - u1) + tau**2 * (2 * u0 - 4 * um + 2 * u1)
 
     for i in range(substeps):
-        a, m, b = at(i / substeps), at((i + 0.5) / substeps), at((i + 1) / substeps)
+        if substeps == 1:  # the stage inputs themselves, as in the fit's rows
+            a, m, b = u0, um, u1
+        else:
+            a, m, b = at(i / substeps), at((i + 0.5) / substeps), at((i + 1) / substeps)
         k1 = rhs(x, a)
         k2 = rhs(x + 0.5 * h * k1, m)
         k3 = rhs(x + 0.5 * h * k2, m)

@@ -159,7 +159,11 @@ class IdentifiedModel:
     def simulate(
         self, x0: np.ndarray, inputs: np.ndarray, dt: float, substeps: int = 1
     ) -> np.ndarray:
-        """Open loop: RK4 with each input held for dt. Returns states, shape (len(inputs)+1, n)."""
+        """Open loop: RK4 with each input held for dt. Returns states, shape (len(inputs)+1, n).
+
+        Inputs the model was identified with as measured signals (``meta.measured_inputs``)
+        are interpolated within each step as in the fit (the last step holds them).
+        """
         x0 = np.asarray(x0, dtype=np.float64)
         inputs = np.atleast_2d(np.asarray(inputs, dtype=np.float64))
         if x0.shape != (len(self.state_names),):
@@ -170,6 +174,21 @@ class IdentifiedModel:
             )
         out = np.empty((len(inputs) + 1, x0.size))
         out[0] = x = x0
+        measured = [self.input_names.index(n) for n in self.meta.get("measured_inputs", ())]
+        if measured:  # signals, not commands: interpolated within each step as in the fit
+            from identification.data import stage_inputs
+            from identification.fit import rk4_steps
+
+            t = np.arange(len(inputs)) * dt
+            rows = np.arange(len(inputs) - 1)
+            stages = stage_inputs(t, inputs, rows, measured)
+            h = np.full(1, dt)
+            for k in rows:
+                x = rk4_steps(self.rhs, x[None, :], tuple(s[k : k + 1] for s in stages), h,
+                              substeps)[0]  # fmt: skip
+                out[k + 1] = x
+            out[-1] = rk4_step(self.rhs, x, inputs[-1], dt, substeps)  # no later sample: held
+            return out
         for k, u in enumerate(inputs):
             x = rk4_step(self.rhs, x, u, dt, substeps)
             out[k + 1] = x
