@@ -138,6 +138,68 @@ def simulate(
     typer.echo(f"wrote {len(rows)} rows to {out}")
 
 
+@app.command()
+def flights(
+    out: Annotated[Path, typer.Option(help="folder for the flights (flight_K.csv)")],
+    system: Annotated[str, typer.Option(help="planar or quad6dof")] = "planar",
+    vehicle: VehicleOption = None,
+    param: ParamOption = None,
+    count: Annotated[int | None, typer.Option(help="flights (default 3 planar, 4 6-DOF)")] = None,
+    steps: Annotated[int, typer.Option(help="samples per flight")] = 1000,
+    dt: Annotated[float, typer.Option(help="sample and input-hold period [s]")] = 0.01,
+    tilt: Annotated[float, typer.Option(help="tilt amplitude of the references [rad]")] = 0.2,
+    excitation: Annotated[
+        float, typer.Option(help="random input noise, fraction of the hover thrust")
+    ] = 0.05,
+    open_loop: Annotated[bool, typer.Option(help="hover thrust plus random sines, no PD")] = False,
+    drag: Annotated[float, typer.Option(help="linear drag coefficient [N s/m]")] = 0.0,
+    integrator: Annotated[str, typer.Option(help="rk4 | rk4x10 | solve_ivp")] = "rk4",
+    noise: Annotated[float, typer.Option(help="Gaussian noise on the logged states")] = 0.0,
+    seed: Annotated[int, typer.Option(help="seed of the flights and the noise")] = 0,
+) -> None:
+    """Identification flights of any vehicle: the data of the docs' figures, one CSV each.
+
+    PD flights to random waypoints with input excitation (6-DOF: with a yaw sweep, which the
+    ``simulate`` cases lack, so their 6-DOF data cannot separate the yaw terms), applied
+    inputs recorded; identify them with ``quad-sindy identify OUT/flight_*.csv``.
+    """
+    from identification.data import write_trajectory_csv
+    from identification.experiments.synthetic import (
+        FlightSpec,
+        add_noise,
+        planar_flights,
+        quad6dof_flights,
+    )
+    from quad_envs.params import get_preset, with_changes
+
+    if system not in ("planar", "quad6dof"):
+        _fail(f"--system is planar or quad6dof, not {system!r}")
+    if noise < 0:
+        _fail(f"--noise must be non-negative, got {noise}")
+    try:
+        params = get_preset(vehicle or "paper", system)
+        changes = _vehicle_options(None, param).get("params")
+        if changes:
+            params = with_changes(params, changes)
+        spec = FlightSpec(flights=count or (3 if system == "planar" else 4), steps=steps, dt=dt,
+                          integrator=integrator, open_loop=open_loop, tilt=tilt,
+                          excitation=excitation, drag=drag, seed=seed)  # fmt: skip
+        make = planar_flights if system == "planar" else quad6dof_flights
+        trajs = make(params, spec)
+    except ValueError as exc:
+        _fail(str(exc))
+    if noise > 0:
+        trajs = add_noise(trajs, noise, seed=100 + seed)
+    _writable_folder(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for k, tr in enumerate(trajs):
+        write_trajectory_csv(out / f"flight_{k}.csv", tr)
+    typer.echo(
+        f"wrote {len(trajs)} flights of {steps} rows to {out}/ (identify them with: "
+        f"quad-sindy identify {out}/flight_*.csv --out model.json)"
+    )
+
+
 @bench_app.command("envs")
 def bench_envs_cmd(
     num_envs: Annotated[int, typer.Option(help="vector env size")] = 1024,

@@ -235,3 +235,21 @@ def test_mbrl_refuses_a_surrogate_as_ground_truth_before_writing_anything(
                            str(out))  # fmt: skip
     assert_one_line_error(code, err, "--env is the ground truth", "not Quad6DOFSINDy-v0")
     assert not out.exists()
+
+
+def test_flights_of_another_vehicle_identify_to_the_exact_model(monkeypatch, capsys, tmp_path):
+    """`flights` writes identification data for any vehicle (the `simulate` cases hold the
+    yaw still, so 6-DOF data from them are refused as collinear); planar, 1.3 kg here."""
+    from identification.model import load_model
+
+    out = tmp_path / "f"
+    code, _, _ = run_cli(monkeypatch, capsys, "flights", "--param", "mass=1.3", "--param",
+                         "Ixx=0.02", "--param", "rotor_force_max=12", "--steps", "600",
+                         "--out", str(out))  # fmt: skip
+    assert code in (0, None) and len(list(out.glob("flight_*.csv"))) == 3
+    code, _, _ = run_cli(monkeypatch, capsys, "identify", *map(str, sorted(out.glob("*.csv"))),
+                         "--out", str(tmp_path / "m.json"))  # fmt: skip
+    model = load_model(tmp_path / "m.json")
+    assert code in (0, None) and model.n_terms == 7
+    row = model.coefficients[model.state_names.index("z_dot")]
+    assert abs(row[model.feature_names.index("cos(phi) u1")] * 1.3 - 1) < 1e-6
