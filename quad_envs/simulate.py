@@ -8,6 +8,7 @@ step with the (saturated) command held over the step.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -99,6 +100,15 @@ def simulate_closed_loop(
     return ClosedLoopRun(t, states, commanded, applied, refs, vehicle)
 
 
+def check_can_hover(params: Any) -> None:
+    """Raises ValueError when the rotors' largest thrust does not exceed the weight."""
+    if hasattr(params, "thrust_max") and not params.thrust_max > params.hover_thrust:
+        raise ValueError(
+            f"the vehicle cannot hover: its largest thrust {params.thrust_max:.4g} N does not "
+            f"exceed its weight m g = {params.hover_thrust:.4g} N (raise rotor_force_max)"
+        )
+
+
 def simulate_case(
     case: str, vehicle: str | Vehicle = "planar", dt: float = 0.01, duration: float = 10.0
 ) -> ClosedLoopRun:
@@ -109,11 +119,6 @@ def simulate_case(
             weight): no controller can fly the reference, and the run would be a fall.
     """
     veh = get_vehicle(vehicle) if isinstance(vehicle, str) else vehicle
-    params = veh.params
-    if hasattr(params, "thrust_max") and not params.thrust_max > params.hover_thrust:
-        raise ValueError(
-            f"the vehicle cannot hover: its largest thrust {params.thrust_max:.4g} N does not "
-            f"exceed its weight m g = {params.hover_thrust:.4g} N (raise rotor_force_max)"
-        )
+    check_can_hover(veh.params)
     traj = make_trajectory(case, ndim=veh.ndim, rng=np.random.default_rng(0))
     return simulate_closed_loop(veh, traj, dt=dt, duration=duration)

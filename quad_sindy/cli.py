@@ -171,17 +171,23 @@ def flights(
         quad6dof_flights,
     )
     from quad_envs.params import get_preset, with_changes
+    from quad_envs.simulate import check_can_hover
 
     if system not in ("planar", "quad6dof"):
         _fail(f"--system is planar or quad6dof, not {system!r}")
     if noise < 0:
         _fail(f"--noise must be non-negative, got {noise}")
+    if (count is not None and count < 1) or steps < 20 or not dt > 0:
+        _fail(f"--count must be positive, --steps at least 20 and --dt positive, got {count}, "
+              f"{steps} and {dt}")  # fmt: skip
     try:
         params = get_preset(vehicle or "paper", system)
         changes = _vehicle_options(None, param).get("params")
         if changes:
             params = with_changes(params, changes)
-        spec = FlightSpec(flights=count or (3 if system == "planar" else 4), steps=steps, dt=dt,
+        check_can_hover(params)
+        default = 3 if system == "planar" else 4
+        spec = FlightSpec(flights=count or default, steps=steps, dt=dt,
                           integrator=integrator, open_loop=open_loop, tilt=tilt,
                           excitation=excitation, drag=drag, seed=seed)  # fmt: skip
         make = planar_flights if system == "planar" else quad6dof_flights
