@@ -180,6 +180,7 @@ def flights(
     if (count is not None and count < 1) or steps < 20 or not dt > 0:
         _fail(f"--count must be positive, --steps at least 20 and --dt positive, got {count}, "
               f"{steps} and {dt}")  # fmt: skip
+    _writable_folder(out)
     try:
         params = get_preset(vehicle or "paper", system)
         changes = _vehicle_options(None, param).get("params")
@@ -196,7 +197,6 @@ def flights(
         _fail(str(exc))
     if noise > 0:
         trajs = add_noise(trajs, noise, seed=100 + seed)
-    _writable_folder(out)
     out.mkdir(parents=True, exist_ok=True)
     for k, tr in enumerate(trajs):
         write_trajectory_csv(out / f"flight_{k}.csv", tr)
