@@ -371,6 +371,14 @@ def identify(
                     "angles enter only through sin and cos once declared (--angles, or angles= "
                     "in --library)"
                 )
+            held = [n for n in first.input_names
+                    if _looks_like_angle(n) and n not in first.measured]  # fmt: skip
+            if held and preset is None:
+                typer.echo(
+                    f"note: input(s) {', '.join(held)} look like a logged attitude: if they are "
+                    "measured signals rather than commands held over each step, declare them "
+                    "with --measured (held, a changing tilt leaves terms of about g dt / 2)"
+                )
             if library is None and preset is None:
                 trig = (
                     f", sin and cos of {', '.join(declared)} alone and times each variable"

@@ -309,8 +309,14 @@ def test_a_measured_attitude_as_input_is_interpolated_within_the_step(other_clea
             "u1,phi", "--measured", "phi", "--library", "degree=1;angles=phi"]  # fmt: skip
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
+    assert "look like a logged attitude" not in result.output  # declared
     model = load_model(out)
     assert model.meta["measured_inputs"] == ["phi"]
+    held_args = ["identify", *paths, "--out", str(tmp_path / "held.json"), "--states",
+                 ",".join(names), "--inputs", "u1,phi", "--library", "degree=1;angles=phi",
+                 "--lambda", "0.001"]  # fmt: skip
+    hint = CliRunner().invoke(app, held_args)
+    assert "note: input(s) phi look like a logged attitude" in hint.output
     g, inv_m = 9.81, 1.0 / OTHER_PLANAR.mass
     truth = {(0, "y_dot"): 1.0, (1, "z_dot"): 1.0, (2, "sin(phi) u1"): -inv_m,
              (3, "1"): -g, (3, "cos(phi) u1"): inv_m}  # fmt: skip
