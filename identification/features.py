@@ -18,6 +18,7 @@ costs microseconds, not pysindy's ``predict`` milliseconds.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -100,6 +101,17 @@ def parse_term(name: str, variables: Sequence[str] | None = None) -> Term:
     Raises:
         ValueError: The text is not in the grammar or names an unknown variable.
     """
+    term = _parse_factors(name)
+    if variables is not None:
+        unknown = sorted({v for f in term for v in f.variables()} - set(variables))
+        if unknown:
+            raise ValueError(f"feature {name!r} uses unknown variable(s) {unknown}")
+    return term
+
+
+@functools.lru_cache(maxsize=65536)
+def _parse_factors(name: str) -> Term:
+    # cached: a 6-DOF selection parses the same few hundred names tens of thousands of times
     text = name.strip()
     if not text:
         raise ValueError("empty feature name")
@@ -127,10 +139,6 @@ def parse_term(name: str, variables: Sequence[str] | None = None) -> Term:
         var, k = power.group(1), int(power.group(2) or 1)
         powers[var] = powers.get(var, 0) + k
     factors = [Factor(v, "pow", k) for v, k in powers.items()] + trig
-    if variables is not None:
-        unknown = sorted({v for f in factors for v in f.variables()} - set(variables))
-        if unknown:
-            raise ValueError(f"feature {name!r} uses unknown variable(s) {unknown}")
     return tuple(sorted(factors))
 
 

@@ -92,10 +92,12 @@ def stepwise_path(
         and the gain (drop of the residual sum of squares) of the column it added.
     """
     p = a.shape[1]
+    a = np.asfortranarray(a)  # the path gathers columns: contiguous ones are 3x faster
     norms2 = np.einsum("ij,ij->j", a, a)
     usable = norms2 > 0
     support: list[int] = []
-    basis = np.zeros((a.shape[0], 0))  # orthonormal basis of the chosen columns
+    basis = np.zeros((a.shape[0], 0))  # orthonormal basis of the chosen columns, in order
+    qta = np.zeros((0, p))  # basis^T a: each column's coordinates in that span
     proj2 = np.zeros(p)  # squared norm of each column's part inside that span
     resid = b.copy()
     outside = (float(b @ b) if total is None else total) - float(b @ b)
@@ -113,7 +115,7 @@ def stepwise_path(
         if not ok.any():
             break
         gains = np.zeros(p)
-        gains[ok] = (a[:, ok].T @ resid) ** 2 / perp2[ok]  # a_j . r = a_j_perp . r
+        gains[ok] = (resid @ a)[ok] ** 2 / perp2[ok]  # a_j . r = a_j_perp . r
         if simpler and support:
             # a twin of a chosen term enters beside it only when significant (F-test)
             paired = [t for c in support for t in (*simpler.get(c, ()), *complex_of.get(c, ()))]
@@ -148,25 +150,39 @@ def stepwise_path(
         q -= basis @ (basis.T @ q)  # twice is enough (Giraud et al.)
         q /= np.linalg.norm(q)
         basis = np.column_stack([basis, q])
-        proj2 += (q @ a) ** 2
+        qa = q @ a
+        qta = np.vstack([qta, qa])
+        proj2 += qa**2
         resid -= q * (q @ resid)
-        # backward: drop the cheapest chosen column while it costs < half this gain
+        # backward: drop the cheapest chosen column while it costs < half this gain, on the
+        # small factor A_S = basis R (a removal re-triangularises R: rotate = its Q)
         pruned = False
+        r = np.triu(qta[:, support])
+        qtb = basis.T @ b
+        rotate = np.eye(len(support))
         while len(support) > 1:
-            loss = _removal_costs(a, b, support)
+            loss = _costs_from_factor(r, qtb)
             k = int(np.argmin(loss[:-1]))  # never the column just added
             if loss[k] >= BACKWARD_FRACTION * gain:
                 break
             support.pop(k)
+            q_k, r = np.linalg.qr(np.delete(r, k, axis=1))
+            qtb = q_k.T @ qtb
+            rotate = rotate @ q_k
             pruned = True
+        if pruned:
+            basis = basis @ rotate
+            qta = rotate.T @ qta
         # Twin choices are F-tests against the residual variance, which only moves when a
         # significant column enters: re-check them then, not in the noise tail of the path.
         rss_now = outside + float(resid @ resid)
         if simpler and gain > F_CRITICAL * rss_now / max(n_rows - len(support), 1.0):
-            pruned |= _swap_twins(a, b, support, simpler, complex_of, outside, n_rows, tol)
+            if _swap_twins(a, b, support, simpler, complex_of, outside, n_rows, tol, norms2):
+                basis = np.linalg.qr(a[:, support])[0]
+                qta = basis.T @ a
+                pruned = True
         if pruned:
-            basis = np.linalg.qr(a[:, support])[0]
-            proj2 = np.einsum("ij,ij->j", basis.T @ a, basis.T @ a)
+            proj2 = np.einsum("ij,ij->j", qta, qta)
             resid = b - basis @ (basis.T @ b)
         key = tuple(sorted(support))
         path.append((key, gain))
@@ -193,6 +209,7 @@ def _swap_twins(
     outside: float,
     n_rows: float,
     tol: float = COLLINEAR_TOL,
+    norms2: np.ndarray | None = None,
 ) -> bool:
     """Swaps chosen columns for near-collinear twins in place; returns whether any changed.
 
@@ -201,7 +218,7 @@ def _swap_twins(
     significantly more. Early in the path the residual variance still holds unexplained
     signal, so a choice made then is checked again here with the current variance.
     """
-    norms2 = np.einsum("ij,ij->j", a, a)
+    norms2 = np.einsum("ij,ij->j", a, a) if norms2 is None else norms2
     changed = False
     for _ in range(2 * len(support)):
         twins = {
@@ -568,8 +585,13 @@ def _removal_costs(
 ) -> np.ndarray:
     """Increase of the RSS when each chosen column is removed: ``coef^2 / (R^-1 R^-T)_kk``."""
     q, r = qr if qr is not None else np.linalg.qr(a[:, list(support)])
+    return _costs_from_factor(r, q.T @ b)
+
+
+def _costs_from_factor(r: np.ndarray, qtb: np.ndarray) -> np.ndarray:
+    """:func:`_removal_costs` from the triangular factor R of the chosen columns and Q^T b."""
     r_inv = np.linalg.inv(r)
-    coef = r_inv @ (q.T @ b)
+    coef = r_inv @ qtb
     return coef**2 / np.maximum(np.einsum("ij,ij->i", r_inv, r_inv), 1e-300)
 
 
