@@ -212,18 +212,51 @@ def _parse_spec_text(text: str) -> dict[str, object]:
     for item in filter(None, (p.strip() for p in text.split(";"))):
         key, sep, value = item.partition("=")
         if not sep:
-            raise ValueError(f"library spec item {item!r} is not key=value")
-        key = key.strip()
+            raise ValueError(
+                f"library spec item {item!r} is not key=value (items are separated by ';')"
+            )
+        out[key.strip()] = value.strip()
+    return _check_fields(out, "library spec")
+
+
+_TRUE, _FALSE = ("1", "true", "yes", "on"), ("0", "false", "no", "off")
+
+
+def _check_fields(fields: dict[str, object], source: str) -> dict[str, object]:
+    """Checks and converts the values of a spec (text values or TOML values) for LibrarySpec."""
+    allowed = set(LibrarySpec.__dataclass_fields__)
+    unknown = sorted(set(fields) - allowed)
+    if unknown:
+        raise ValueError(f"{source}: unknown key(s) {unknown}; valid: {sorted(allowed)}")
+    out: dict[str, object] = {}
+    for key, value in fields.items():
         if key in ("degree", "frequencies"):
-            out[key] = int(value)
+            text = value.strip() if isinstance(value, str) else value
+            if isinstance(text, str) and text.lstrip("+-").isdigit():
+                text = int(text)
+            if isinstance(text, bool) or not isinstance(text, int):
+                split = isinstance(value, str) and ("," in value or "=" in value)
+                hint = " (items are separated by ';')" if split else ""
+                raise ValueError(f"{source}: {key} must be an integer, got {value!r}{hint}")
+            out[key] = text
         elif key in ("trig_products", "input_products"):
-            out[key] = value.strip().lower() in ("1", "true", "yes")
+            if isinstance(value, str) and value.strip().lower() in _TRUE + _FALSE:
+                value = value.strip().lower() in _TRUE
+            if not isinstance(value, bool):
+                raise ValueError(f"{source}: {key} must be true or false, got {value!r}")
+            out[key] = value
         elif key in ("angles", "extra", "drag"):
-            out[key] = tuple(v.strip() for v in value.split(",") if v.strip())
-        elif key == "drag_angle":
+            items = value.split(",") if isinstance(value, str) else value
+            if not isinstance(items, list | tuple) or not all(isinstance(v, str) for v in items):
+                raise ValueError(
+                    f"{source}: {key} must be a list of names (or one comma-separated "
+                    f"string), got {value!r}"
+                )
+            out[key] = tuple(v.strip() for v in items if v.strip())
+        else:  # drag_angle
+            if not isinstance(value, str):
+                raise ValueError(f"{source}: {key} must be a variable name, got {value!r}")
             out[key] = value.strip()
-        else:
-            raise ValueError(f"unknown library spec key {key!r}")
     return out
 
 
@@ -289,13 +322,6 @@ def _read_toml(path: Path, angles: Sequence[str]) -> dict[str, object]:
         raise ValueError(f"{path}: malformed TOML ({exc})") from None
     if not isinstance(table, dict):
         raise ValueError(f"{path}: needs a [library] table")
-    allowed = set(LibrarySpec.__dataclass_fields__)
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        raise ValueError(f"{path}: unknown key(s) {unknown}; valid: {sorted(allowed)}")
-    out = dict(table)
-    for key in ("angles", "extra", "drag"):
-        if key in out:
-            out[key] = tuple(out[key])
+    out = _check_fields(table, str(path))
     out.setdefault("angles", tuple(angles))
     return out

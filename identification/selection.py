@@ -236,6 +236,41 @@ def make_units(trajs: Sequence[Trajectory], folds: int, min_rows: int) -> list[T
     return units
 
 
+MIN_UNIT_ROWS = 20
+"""Fewest rows of one cross-validation block."""
+
+
+def validation_units(
+    trajs: Sequence[Trajectory], folds: int, windows: Sequence[int], horizon: int
+) -> tuple[list[Trajectory], list[int], int]:
+    """The cross-validation units, and the windows and horizon that fit them.
+
+    Windows are capped at a quarter and the horizon at half of the typical segment; on a
+    single short log (one flight of 150 rows) they shrink further until the data make two
+    blocks, so that every fold has data to train on.
+
+    Raises:
+        ValueError: Too few rows for two blocks of :data:`MIN_UNIT_ROWS`.
+    """
+    typical = typical_length(trajs)
+    wins = sorted({int(w) for w in windows if 0 < w < max(typical // 4, 2)}) or [1]
+    horizon = int(max(1, min(horizon, typical // 2)))
+    while True:
+        units = make_units(trajs, folds, min_rows=max(2 * horizon, 4 * max(wins), MIN_UNIT_ROWS))
+        if len(units) >= 2 or (horizon <= 5 and wins == [1]):
+            break
+        horizon = max(min(horizon, 5), horizon // 2)
+        wins = [w for w in wins if w < max(wins)] or [1]
+    if len(units) < 2:
+        rows = sum(len(t) for t in trajs)
+        raise ValueError(
+            f"too little data to validate a model: {rows} rows in {len(trajs)} segment(s) "
+            f"make one validation block, and automatic selection needs two of at least "
+            f"{MIN_UNIT_ROWS} rows; record more, or give a fixed --lambda"
+        )
+    return units, wins, horizon
+
+
 def typical_length(trajs: Sequence[Trajectory], share: float = 0.9) -> int:
     """The longest length L such that segments of at least L rows hold ``share`` of the rows.
 
@@ -768,10 +803,7 @@ def select_model(
     base = config or FitConfig(optimizer="stepwise")
     TALLY.counts.clear()
     check_identifiable(Gram.stack(grams(trajs, names, "forward", 1)), names, trajs)
-    typical = typical_length(trajs)
-    windows = sorted({int(w) for w in windows if 0 < w < max(typical // 4, 2)}) or [1]
-    horizon = int(max(1, min(horizon, typical // 2)))
-    units = make_units(trajs, folds, min_rows=max(2 * horizon, 4 * max(windows), 20))
+    units, windows, horizon = validation_units(trajs, folds, windows, horizon)
     k = min(folds, len(units))
     fold_of = np.arange(len(units)) % k
     x_all = np.concatenate([t.x for t in trajs])

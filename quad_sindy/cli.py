@@ -30,6 +30,8 @@ app.add_typer(bench_app, name="bench")
 
 SystemName = Enum("SystemName", {name: name for name in VEHICLES}, type=str)
 """The registered vehicles (``quad_envs.vehicles.VEHICLES``) as command-line choices."""
+PresetName = Enum("PresetName", {name: name for name in ("planar", "quad6dof")}, type=str)
+"""The vehicles whose variable names and library ``identify`` knows."""
 
 
 def _fail(message: str) -> None:
@@ -277,7 +279,7 @@ def identify(
     data: Annotated[list[Path], typer.Argument(help="CSV, parquet or NPZ trajectory files")],
     out: Annotated[Path, typer.Option(help="model JSON to write")],
     system: Annotated[
-        SystemName | None, typer.Option(help="preset vehicle: its variable names and library")
+        PresetName | None, typer.Option(help="preset vehicle: its variable names and library")
     ] = None,
     columns: Annotated[
         str | None, typer.Option(help="names of a CSV's columns in order (replaces its header)")

@@ -154,6 +154,44 @@ def test_a_short_fragment_does_not_cap_the_window_and_horizon(other_clean):
     assert report.horizon == 50 and {c.window for c in report.candidates} == {1, 64}
 
 
+def test_one_short_log_is_cut_into_two_blocks_or_refused(other_clean):
+    # 150 rows of one flight used to make one validation block: fold 0 had nothing to train
+    # on (an IndexError); the horizon and windows now shrink until there are two blocks
+    short = other_clean[1].slice(0, 150)
+    model, report = select_model([short], planar_library(), n_models=0)
+    assert report.folds >= 2 and report.horizon < 50
+    assert check_support(model, truth_planar(OTHER_PLANAR)).exact_support
+    with pytest.raises(ValueError, match="too little data to validate a model: 30 rows"):
+        select_model([short.slice(0, 30)], planar_library(), n_models=0)
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ('degree = 1.5', "degree must be an integer, got 1.5"),
+        ('trig_products = "maybe"', "trig_products must be true or false"),
+        ('angles = [1]', "angles must be a list of names"),
+    ],
+)
+def test_library_toml_values_of_the_wrong_type_are_named(tmp_path, spec, message):
+    path = tmp_path / "lib.toml"
+    path.write_text(f"[library]\n{spec}\n")
+    with pytest.raises(ValueError, match=message):
+        library_from_spec(str(path), PS, PI)
+
+
+def test_library_spec_text_and_toml_read_the_same_values(tmp_path):
+    # "no" in TOML was read as true (any non-empty string); a lone string was split into
+    # letters (angles = "phi" gave the angles p, h, i)
+    path = tmp_path / "lib.toml"
+    path.write_text('[library]\ndegree = 1\nangles = "phi"\ntrig_products = "no"\n')
+    text = library_from_spec("degree=1;angles=phi;trig_products=no", PS, PI)
+    assert library_from_spec(str(path), PS, PI) == text
+    assert "sin(phi) y" not in text and "sin(phi) u1" in text
+    with pytest.raises(ValueError, match="separated by ';'"):
+        library_from_spec("degree=1,extra=u1", PS, PI)
+
+
 # -- real logs --------------------------------------------------------------------------
 def test_clean_bridges_a_lost_sample_and_a_glitch_and_splits_at_gaps(other_clean):
     tr = other_clean[0]

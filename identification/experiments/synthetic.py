@@ -263,7 +263,8 @@ def quad6dof_flights(
         if not worst < MAX_FLIGHT_TILT:
             raise ValueError(
                 f"flight {len(trajs)} of this vehicle tilted to {worst:.3g} rad: the PD lost it "
-                f"(saturated rotors); lower spec.tilt (now {spec.tilt})"
+                f"(saturated rotors); lower the tilt (now {spec.tilt}) or give the vehicle more "
+                "control authority (rotor_force_max; arm_length for roll and pitch, gamma for yaw)"
             )
         trajs.append(
             Trajectory(t, states, applied, QUAD6DOF_STATE_NAMES, QUAD6DOF_INPUT_NAMES, meta={})
