@@ -228,7 +228,12 @@ class CleanReport:
         stale_rows: Rows dropped because they repeat the previous row's states (or time).
         nonfinite_rows: Rows dropped because a value is NaN or infinite.
         outlier_rows: Rows dropped as outliers (robust z-score of the state).
+        input_spikes: Rows dropped because an input spikes far outside its range for that row
+            alone (a logging glitch: a motor speed of 1e5 rad/s for one sample).
+        restarts: Places where the time column jumps back and runs on (logs appended in one
+            file): the log is split there, both parts kept.
         gaps: Time gaps (step > ``gap_factor`` x median step) where the log was split.
+        cuts: Other places where the log was split: rows between were dropped.
         bridged: Rows of the above kept as missing (time and input used, states predicted).
         unwrapped: Jumps of 2 pi removed from declared angle states (a logger wrapping them
             to [-pi, pi]).
@@ -242,7 +247,10 @@ class CleanReport:
     stale_rows: int = 0
     nonfinite_rows: int = 0
     outlier_rows: int = 0
+    input_spikes: int = 0
+    restarts: int = 0
     gaps: int = 0
+    cuts: int = 0
     bridged: int = 0
     unwrapped: int = 0
     short_segments: int = 0
@@ -262,7 +270,8 @@ class CleanReport:
     def changed(self) -> bool:
         """Whether cleaning changed anything a user should hear about."""
         repaired = (self.stale_rows, self.nonfinite_rows, self.outlier_rows, self.gaps,
-                    self.bridged, self.unwrapped, self.short_segments)  # fmt: skip
+                    self.cuts, self.bridged, self.unwrapped, self.short_segments, self.input_spikes,
+                    self.restarts)  # fmt: skip
         return self.rows_out != self.rows_in or any(repaired) or self.jitter > 1e-6
 
     def summary(self) -> str:
@@ -277,7 +286,15 @@ class CleanReport:
                 if self.bridged
                 else ""
             )
-            + f", {self.short_segments} short segment(s); split at {self.gaps} gap(s); "
+            + (f", {self.input_spikes} rows with an input spike" if self.input_spikes else "")
+            + f", {self.short_segments} short segment(s); split at {self.gaps} time gap(s)"
+            + (f" and {self.cuts} run(s) of dropped rows" if self.cuts else "")
+            + "; "
+            + (
+                f"split at {self.restarts} place(s) where the time goes back (logs appended); "
+                if self.restarts
+                else ""
+            )
             + (
                 f"unwrapped {self.unwrapped} jump(s) of 2 pi in the angles; "
                 if self.unwrapped
@@ -344,6 +361,23 @@ def clean(
     t = np.asarray(t, dtype=np.float64)
     x = np.array(x, dtype=np.float64).reshape(t.size, -1)  # a copy: angles are unwrapped
     u = np.asarray(u, dtype=np.float64).reshape(t.size, -1)
+    restarts = _time_restarts(t, gap_factor)
+    if restarts.size:  # logs appended in one file: clean each on its own
+        options = dict(gap_factor=gap_factor, outlier_z=outlier_z, min_rows=min_rows,
+                       bridge=bridge, angles=angles, measured=measured)  # fmt: skip
+        segments, report = [], CleanReport(restarts=int(restarts.size))
+        for part in np.split(np.arange(t.size), restarts):
+            try:
+                segs, rep = clean(t[part], x[part], u[part], state_names, input_names, **options)
+            except ValueError:  # nothing usable in this part
+                segs, rep = [], CleanReport(rows_in=part.size, short_segments=1)
+            segments += segs
+            report = report.merge(rep)
+        if not segments:
+            raise ValueError(f"no segment of at least {min_rows} clean rows in the log's "
+                             f"{restarts.size + 1} parts (its time goes back {restarts.size} "
+                             "time(s))")  # fmt: skip
+        return segments, report
     report = CleanReport(rows_in=t.size)
     twice = np.zeros(t.size, dtype=bool)
     twice[1:] = (
@@ -403,6 +437,9 @@ def clean(
         outliers[idx[1:-1][peak]] = True
     report.outlier_rows = int(outliers.sum())
     bad_x |= outliers
+    spikes = _input_spikes(t, u, np.flatnonzero(~dropped))
+    report.input_spikes = int(spikes.sum())
+    dropped |= spikes
     # runs of bad states longer than ``bridge`` are dropped like bad times
     rows = np.flatnonzero(~dropped)
     flagged = bad_x[rows]
@@ -417,8 +454,9 @@ def clean(
     steps = np.diff(t[rows])
     median = float(np.median(steps)) if steps.size else 0.0
     gap = steps > gap_factor * median
-    report.gaps = int(gap.sum())
-    cuts = np.flatnonzero(gap | (np.diff(rows) > 1)) + 1
+    lost = np.diff(rows) > 1  # rows between were dropped
+    report.gaps, report.cuts = int((gap & ~lost).sum()), int(lost.sum())
+    cuts = np.flatnonzero(gap | lost) + 1
     segments = []
     for part in np.split(rows, cuts):
         observed = np.flatnonzero(~bad_x[part])
@@ -446,6 +484,48 @@ def clean(
     report.segments = len(segments)
     report.rows_out = int(sum(len(s) for s in segments))
     return segments, report
+
+
+def _time_restarts(t: np.ndarray, gap_factor: float) -> np.ndarray:
+    """Rows where the time jumps back by more than ``gap_factor`` steps (a log appended)."""
+    steps = np.diff(t)
+    forward = steps[np.isfinite(steps) & (steps > 0)]
+    if not forward.size:
+        return np.zeros(0, dtype=int)
+    back = np.flatnonzero(steps < -gap_factor * float(np.median(forward))) + 1
+    return back[(back >= 2) & (back <= t.size - 2)]  # a part of one row is a stale row
+
+
+SPIKE_ROWS = 3
+"""Longest run of rows an input spike may last (a glitch, re-sent for a row or two)."""
+
+
+def _input_spikes(t: np.ndarray, u: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Rows (among ``rows``) where an input spikes far outside its range for a row or three.
+
+    A spike lies outside the input's range widened by that range on both sides (0.5 and
+    99.5 percentiles), lasts at most :data:`SPIKE_ROWS` rows, and the rows before and after it
+    agree (they differ by under a quarter of the excursion): a command that steps differs
+    across the step by the step itself, and a pulse of a binary excitation signal stays
+    inside its range.
+    """
+    out = np.zeros(t.size, dtype=bool)
+    if rows.size < 5:
+        return out
+    us = u[rows]
+    low, high = np.percentile(us, [0.5, 99.5], axis=0)
+    wide = high - low
+    for j in range(us.shape[1]):
+        outside = (us[:, j] > high[j] + wide[j]) | (us[:, j] < low[j] - wide[j])
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], outside.astype(int), [0]])))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if b - a > SPIKE_ROWS or a == 0 or b == us.shape[0]:
+                continue
+            before, after = us[a - 1, j], us[b, j]
+            excursion = np.max(np.abs(us[a:b, j] - 0.5 * (before + after)))
+            if abs(after - before) < 0.25 * excursion:
+                out[rows[a:b]] = True
+    return out
 
 
 def _ignored(name: str) -> bool:
@@ -513,6 +593,13 @@ def resolve_names(
             f"no states or no inputs among the columns {cols}: name them with --states and "
             "--inputs (states=, inputs= in Python)"
         )
+    unusable = [c for c in (*st, *inp) if not re.fullmatch(r"[A-Za-z_]\w*", c)]
+    if unusable:
+        raise ValueError(
+            f"column name(s) {unusable} cannot name variables in equations (letters, digits "
+            "and _, not starting with a digit): rename the columns with --columns "
+            "(columns= in Python)"
+        )
     return st, inp
 
 
@@ -559,48 +646,116 @@ def _read_table(
     states: Sequence[str] | None,
     inputs: Sequence[str] | None,
     time: str,
+    time_unit: float = 1.0,
 ) -> tuple[list[str], np.ndarray, list[str], list[str]]:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such data file: {path}")
+    wanted = [c for c in (time, *(states or ()), *(inputs or ())) if c]
     if path.suffix.lower() in (*PARQUET_SUFFIXES, ".npz"):
-        table = read_table(path)
+        table = read_table(path, time=time, time_unit=time_unit)
         names = list(table)
         if not names or not len(table[names[0]]):
             raise ValueError(f"{path} has no rows of numeric columns")
-        data = np.column_stack(list(table.values()))
         if columns is not None:
             if len(columns) != len(names):
                 raise ValueError(f"{path} has {len(names)} numeric columns but {len(columns)} "
                                  "names were given")  # fmt: skip
+            table = dict(zip(columns, table.values(), strict=True))
             names = list(columns)
-        st, inp = resolve_names(names, system, states, inputs, time)
-        return names, data, st, inp
+    else:
+        table = _read_csv_columns(path, columns, wanted, time, time_unit)
+        names = list(table)
+    data = np.column_stack(list(table.values())) if names else np.zeros((0, 0))
+    st, inp = resolve_names(names, system, states, inputs, time)
+    return names, data, st, inp
+
+
+def _read_csv_columns(
+    path: Path, columns: Sequence[str] | None, wanted: Sequence[str], time: str, time_unit: float
+) -> dict[str, np.ndarray]:
+    """A CSV file's numeric columns (the delimiter, a header, quotes, a BOM found as written)."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
     try:
-        text = path.read_text()
+        with open(path, encoding="utf-8-sig") as handle:
+            first = handle.readline().strip()
     except UnicodeDecodeError:
         raise ValueError(
             f"{path} is not a text CSV file (data files are CSV with a header, "
             f"{' / '.join(PARQUET_SUFFIXES)} or .npz)"
         ) from None
-    first = text.splitlines()[0] if text.strip() else ""
-    has_header = any(ch.isalpha() for ch in first.replace("e-", "").replace("e+", ""))
-    if columns is None:
-        if not has_header:
-            raise ValueError(
-                f"{path} has no header: pass --columns (columns= in Python) naming its columns"
-            )
-        columns = [c.strip() for c in first.split(",")]
-    try:
-        data = np.loadtxt(
-            io.StringIO(text), delimiter=",", skiprows=1 if has_header else 0, ndmin=2
+    if not first:
+        raise ValueError(f"{path} is empty")
+    delimiter = next((d for d in (",", ";", "\t") if d in first), ",")
+    fields = [f.strip().strip('"').strip("'") for f in first.split(delimiter)]
+    has_header = not all(_is_number(f) for f in fields)
+    if columns is None and not has_header:
+        raise ValueError(
+            f"{path} has no header: pass --columns (columns= in Python) naming its columns"
         )
-    except ValueError as exc:
+    if columns is not None and len(columns) != len(fields):
+        raise ValueError(f"{path} has {len(fields)} columns but {len(columns)} names were given")
+    names = list(columns) if columns is not None else [f.strip() for f in fields]
+    if len(set(names) - {"_"}) != len([c for c in names if c != "_"]):
+        raise ValueError(f"duplicate column names in {names}")
+    unique = [c if c != "_" else f"_{i}" for i, c in enumerate(names)]
+    options = pcsv.ReadOptions(column_names=unique, skip_rows=1 if has_header else 0)
+    try:
+        table = pcsv.read_csv(path, read_options=options,
+                              parse_options=pcsv.ParseOptions(delimiter=delimiter))  # fmt: skip
+    except (OSError, pa.ArrowInvalid) as exc:
         raise ValueError(f"{path}: not a numeric CSV ({exc})") from None
-    if data.shape[1] != len(columns):
-        raise ValueError(f"{path} has {data.shape[1]} columns but {len(columns)} names were given")
-    st, inp = resolve_names(columns, system, states, inputs, time)
-    return list(columns), data, st, inp
+    out = _float_columns(table, path, wanted, time, time_unit)
+    return {("_" if c.startswith("_") and c[1:].isdigit() else c): v for c, v in out.items()}
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _float_columns(
+    table: Any, path: Path, required: Sequence[str], time: str | None, time_unit: float
+) -> dict[str, np.ndarray]:
+    """An Arrow table's columns as float64 arrays; text columns left out unless required.
+
+    Timestamps become seconds since the earliest one (exact in int64 ns: float64 seconds since
+    1970 would round the steps). A numeric ``time`` column is converted by ``time_unit``
+    (seconds per unit) from its earliest value. Empty cells are NaN.
+    """
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    out: dict[str, np.ndarray] = {}
+    for name in table.column_names:
+        column = table.column(name)
+        scale = 1.0
+        if pa.types.is_timestamp(column.type):  # seconds since the earliest, exact in int64
+            ns = column.cast(pa.timestamp("ns")).cast(pa.int64())
+            column, scale = pc.subtract(ns, pc.min(ns)), 1e-9
+        elif pa.types.is_null(column.type):  # every cell empty
+            out[name] = np.full(len(column), np.nan)
+            continue
+        elif name == time and time_unit != 1.0 and len(column) and (
+            pa.types.is_integer(column.type) or pa.types.is_floating(column.type)
+        ):  # from the earliest value (epoch milliseconds stay exact in int64)
+            column = pc.subtract(column, pc.min(column))
+            scale = time_unit
+        try:
+            values = column.to_numpy(zero_copy_only=False).astype(np.float64)
+        except (TypeError, ValueError, pa.ArrowInvalid):
+            if name in required:
+                raise ValueError(
+                    f"{path}: column {name!r} is not numeric (e.g. {column[0].as_py()!r})"
+                ) from None
+            continue  # a text column nobody asked for (a flight-mode label)
+        out[name] = values * scale
+    return out
 
 
 # -- tables -----------------------------------------------------------------------------
@@ -608,7 +763,12 @@ PARQUET_SUFFIXES = (".parquet", ".pq")
 """File endings read as Apache Parquet tables (flight logs)."""
 
 
-def read_table(path: str | Path, columns: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+def read_table(
+    path: str | Path,
+    columns: Sequence[str] | None = None,
+    time: str | None = None,
+    time_unit: float = 1.0,
+) -> dict[str, np.ndarray]:
     """Reads a parquet, CSV or NPZ file into float64 columns.
 
     Timestamps become seconds since the earliest one (exact: float64 seconds since 1970
@@ -618,19 +778,24 @@ def read_table(path: str | Path, columns: Sequence[str] | None = None) -> dict[s
     Args:
         path: ``.parquet`` / ``.pq``, ``.csv`` or ``.npz`` (one 1-D array per column) file.
         columns: Only these columns (all when None); a missing one raises ValueError.
+        time: The time column, converted to seconds from its earliest value by ``time_unit``
+            when that is not 1 (seconds per unit: 1e-3 for milliseconds).
+        time_unit: Seconds per unit of a numeric ``time`` column.
 
     Returns:
         Column name -> 1-D float array.
     """
     import pyarrow as pa
-    import pyarrow.compute as pc
 
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such log file: {path}")
     suffix = path.suffix.lower()
     if suffix == ".npz":
-        return _read_npz_table(path, columns)
+        table = _read_npz_table(path, columns)
+        if time in table and time_unit != 1.0 and table[time].size:
+            table[time] = (table[time] - table[time].min()) * time_unit
+        return table
     try:
         if suffix in PARQUET_SUFFIXES:
             import pyarrow.parquet as pq
@@ -651,19 +816,7 @@ def read_table(path: str | Path, columns: Sequence[str] | None = None) -> dict[s
             )
     except (OSError, pa.ArrowInvalid) as exc:  # unreadable, or not that format inside
         raise ValueError(f"{path}: cannot read the log ({exc})") from None
-    out: dict[str, np.ndarray] = {}
-    for name in table.column_names:
-        column = table.column(name)
-        scale = 1.0
-        if pa.types.is_timestamp(column.type):  # seconds since the earliest, exact in int64
-            ns = column.cast(pa.timestamp("ns")).cast(pa.int64())
-            column, scale = pc.subtract(ns, pc.min(ns)), 1e-9
-        try:
-            out[name] = column.to_numpy(zero_copy_only=False).astype(np.float64) * scale
-        except (TypeError, ValueError):
-            if columns:
-                raise ValueError(f"{path}: column {name!r} is not numeric") from None
-    return out
+    return _float_columns(table, path, list(columns or ()), time, time_unit)
 
 
 def is_npz_archive(path: str | Path) -> bool:
@@ -720,6 +873,7 @@ def read_log(
     time: str = "t",
     angles: Sequence[str] = (),
     measured: Sequence[str] = (),
+    time_unit: float = 1.0,
 ) -> tuple[list[Trajectory], CleanReport]:
     """Reads a raw CSV or parquet log and :func:`clean` s it: segments and what was dropped.
 
@@ -733,11 +887,12 @@ def read_log(
         time: Name of the time column.
         angles: Angle variables (unwrapped by :func:`clean`).
         measured: Inputs that are measured signals (:attr:`Trajectory.measured`).
+        time_unit: Seconds per unit of the time column (1e-3 for milliseconds).
 
     Returns:
         Clean segments and the report.
     """
-    cols, data, st, inp = _read_table(path, columns, system, states, inputs, time)
+    cols, data, st, inp = _read_table(path, columns, system, states, inputs, time, time_unit)
     segs, report = clean(
         data[:, cols.index(time)], data[:, [cols.index(c) for c in st]],
         data[:, [cols.index(c) for c in inp]], st, inp, angles=angles, measured=measured,
@@ -793,30 +948,39 @@ def load_data(
     time: str = "t",
     angles: Sequence[str] = (),
     measured: Sequence[str] = (),
+    time_unit: float = 1.0,
 ) -> tuple[list[Trajectory], CleanReport]:
     """Reads CSV and parquet logs (cleaned: :func:`read_log`) and NPZ archives as segments.
 
-    Arguments as :func:`read_log` (``time``: the logs' time column, in seconds; ``angles``:
-    the angle variables, unwrapped; ``measured``: the inputs that are measured signals).
+    Arguments as :func:`read_log` (``time``: the logs' time column, in seconds unless
+    ``time_unit`` says otherwise; ``angles``: the angle variables, unwrapped; ``measured``:
+    the inputs that are measured signals).
 
     Returns:
         The segments and the merged cleaning report.
+
+    Raises:
+        ValueError: A file cannot be read or cleaned, logs other variables than the first,
+            or steps :data:`STEP_RATIO` times faster or slower than another (a file in
+            milliseconds among files in seconds).
     """
     trajs: list[Trajectory] = []
     report = CleanReport()
     first: tuple[str, tuple[str, ...]] | None = None
+    steps: dict[str, float] = {}
     for path in paths:
         try:
             if is_npz_archive(path):
                 segs = []
                 for tr in load_npz(path):
-                    part, rep = clean(tr.t, tr.x, tr.u, tr.state_names, tr.input_names,
+                    t = (tr.t - tr.t[0]) * time_unit if time_unit != 1.0 else tr.t
+                    part, rep = clean(t, tr.x, tr.u, tr.state_names, tr.input_names,
                                       angles=angles, measured=measured)  # fmt: skip
                     segs += part
                     report = report.merge(rep)
             else:
                 segs, rep = read_log(path, columns, system, states, inputs, time, angles,
-                                     measured)  # fmt: skip
+                                     measured, time_unit)  # fmt: skip
                 report = report.merge(rep)
         except ValueError as exc:
             message = str(exc)
@@ -832,4 +996,16 @@ def load_data(
                 f"{list(first[1])}: every file must log the same states and inputs"
             )
         trajs.extend(segs)
+        step = float(np.median(np.concatenate([np.diff(sg.t) for sg in segs])))
+        steps[str(path)] = step
+        fast, slow = min(steps, key=steps.get), max(steps, key=steps.get)
+        if steps[slow] >= STEP_RATIO * steps[fast]:
+            raise ValueError(
+                f"{slow} steps {steps[slow]:g} per row but {fast} steps {steps[fast]:g}: "
+                "are their time columns in the same unit? (--time-unit; time_unit= in Python)"
+            )
     return trajs, report
+
+
+STEP_RATIO = 100.0
+"""Files whose median steps differ this much are refused: one is in another time unit."""

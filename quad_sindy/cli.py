@@ -30,6 +30,10 @@ app.add_typer(bench_app, name="bench")
 
 SystemName = Enum("SystemName", {name: name for name in VEHICLES}, type=str)
 """The registered vehicles (``quad_envs.vehicles.VEHICLES``) as command-line choices."""
+TimeUnit = Enum("TimeUnit", {name: name for name in ("s", "ms", "us", "ns")}, type=str)
+"""Units of a numeric time column."""
+SECONDS_PER = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+
 PresetName = Enum("PresetName", {name: name for name in ("planar", "quad6dof")}, type=str)
 """The vehicles whose variable names and library ``identify`` knows."""
 
@@ -284,7 +288,10 @@ def identify(
     columns: Annotated[
         str | None, typer.Option(help="names of a CSV's columns in order (replaces its header)")
     ] = None,
-    time: Annotated[str, typer.Option(help="time column [s]")] = "t",
+    time: Annotated[str, typer.Option(help="time column")] = "t",
+    time_unit: Annotated[
+        TimeUnit, typer.Option(help="unit of a numeric time column (timestamps are read as such)")
+    ] = TimeUnit.s,
     states: Annotated[str | None, typer.Option(help="state columns, comma-separated")] = None,
     inputs: Annotated[str | None, typer.Option(help="input columns, comma-separated")] = None,
     angles: Annotated[str | None, typer.Option(help="angle states (Fourier terms)")] = None,
@@ -335,7 +342,9 @@ def identify(
             split(angles) or list(spec_angles(library)) or list(PRESET_ANGLES.get(preset or "", ()))
         )
         read = (data, split(columns), preset, split(states), split(inputs), time.strip())
-        trajs, cleaning = load_data(*read, angles=declared, measured=split(measured) or ())
+        unit = SECONDS_PER[time_unit.value]
+        trajs, cleaning = load_data(*read, angles=declared, measured=split(measured) or (),
+                                    time_unit=unit)  # fmt: skip
         first = trajs[0]
         library_note = None
         if preset is None and library is None and angles is None:
@@ -346,14 +355,15 @@ def identify(
                     "variables; --library or --angles choose another)"
                 )
                 declared = list(PRESET_ANGLES.get(preset, ()))
-                trajs, cleaning = load_data(*read, angles=declared, measured=first.measured)
+                trajs, cleaning = load_data(*read, angles=declared, measured=first.measured,
+                                            time_unit=unit)  # fmt: skip
                 first = trajs[0]
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")
         if first.dt >= 1.0:
             typer.echo(
-                f"warning: the time step is {first.dt:g}: the time column is read in seconds "
-                "(a log in milliseconds gives rates 1000 times too small)"
+                f"warning: the time step is {first.dt:g} s: a log in milliseconds gives rates "
+                "1000 times too small (say its unit with --time-unit ms)"
             )
         if method == "paper":
             from identification.experiments.paper import PAPER_LAMBDA, fit_paper

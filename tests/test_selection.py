@@ -391,6 +391,90 @@ def test_stage_inputs_hold_commands_and_follow_a_measured_cubic_on_jittery_steps
     assert a is b is c
 
 
+def _csv_text(tr: Trajectory, delimiter: str = ",", header: list[str] | None = None) -> str:
+    names = header or ["t", *PS, *PI]
+    rows = np.column_stack([tr.t, tr.x, tr.u])
+    return "\n".join([delimiter.join(names)] + [delimiter.join(map(repr, r)) for r in rows.tolist()])
+
+
+@pytest.mark.parametrize(
+    "variant", ["bom", "quoted", "semicolon", "tab", "empty_cells", "text_column", "iso_time"]
+)
+def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
+    """Forms a new user's real logs came in, each refused before: Excel's byte-order mark,
+    a quoted header, ';' or tab delimiters, empty cells (pandas' NaN), an unused text column,
+    ISO timestamps."""
+    tr = other_clean[0]
+    text = _csv_text(tr, {"semicolon": ";", "tab": "\t"}.get(variant, ","))
+    lines = text.split("\n")
+    if variant == "bom":
+        text = "\ufeff" + text
+    elif variant == "quoted":
+        text = "\n".join([",".join(f'"{c}"' for c in lines[0].split(","))] + lines[1:])
+    elif variant == "empty_cells":
+        cells = lines[101].split(",")
+        cells[2] = ""
+        text = "\n".join(lines[:101] + [",".join(cells)] + lines[102:])
+    elif variant == "text_column":
+        text = "\n".join([lines[0] + ",mode"] + [ln + ",hover" for ln in lines[1:]])
+    elif variant == "iso_time":
+        stamps = np.datetime64("2026-11-25T10:00:00") + np.round(tr.t * 1e6).astype(
+            "timedelta64[us]")
+        text = "\n".join([lines[0]] + [f"{s}," + ln.split(",", 1)[1]
+                                        for s, ln in zip(stamps, lines[1:], strict=True)])
+    path = tmp_path / "log.csv"
+    path.write_text(text, encoding="utf-8")
+    segs, report = load_data([path], system="planar")
+    assert segs[0].state_names == PS and report.rows_out == len(tr)
+    assert np.allclose(np.concatenate([s.t for s in segs])[:50], tr.t[:50], rtol=0, atol=1e-9)
+    if variant == "empty_cells":  # a lost state: bridged
+        assert (report.nonfinite_rows, report.bridged) == (1, 1)
+    else:
+        assert np.array_equal(segs[0].x, tr.x)
+
+
+def test_time_unit_restarts_and_mixed_units_between_files(other_clean, tmp_path):
+    tr = other_clean[0]
+    ms = Trajectory(np.round(1_764_000_000_000 + tr.t * 1000), tr.x, tr.u, PS, PI)
+    path = str(write_trajectory_csv(tmp_path / "ms.csv", ms))
+    segs, _ = load_data([path], system="planar", time_unit=1e-3)
+    assert np.allclose(segs[0].t, tr.t - tr.t[0], rtol=0, atol=1e-12)
+    # one file in ms among files in s: refused, naming both (a model with no term before)
+    good = str(write_trajectory_csv(tmp_path / "s.csv", other_clean[1]))
+    with pytest.raises(ValueError, match=r"ms\.csv steps 10 per row but .*s\.csv steps 0\.01"):
+        load_data([good, path], system="planar")
+    # two flights appended in one file, the time starting again at 0: both kept (the second
+    # was dropped as 'stale' before, silently)
+    two = [other_clean[0], other_clean[1]]
+    t, x, u = (np.concatenate([getattr(f, k) for f in two]) for k in ("t", "x", "u"))
+    segs, report = clean(t, x, u, PS, PI)
+    assert report.restarts == 1 and report.stale_rows == 0
+    assert [len(s) for s in segs] == [len(two[0]), len(two[1])]
+    assert "time goes back" in report.summary()
+
+
+def test_an_input_spike_is_dropped_and_steps_and_pulses_are_kept(other_clean):
+    """A real motor-speed log held 5 glitch rows of 1e5 rad/s (one of them 3 rows long): the
+    model lost gravity. Spikes far outside the input's range are dropped; a command step and
+    the one-row pulses of a binary excitation stay."""
+    tr = other_clean[0]
+    u = tr.u.copy()
+    u[200, 0] = 1e3  # a lone glitch
+    u[400:403, 0] = -1e3  # one re-sent for three rows
+    u[500:, 1] += 0.5 * np.ptp(u[:, 1])  # a step in the command
+    u[600::40, 1] += 0.3 * np.ptp(u[:, 1])  # pulses inside the range
+    segs, report = clean(tr.t, tr.x, u, PS, PI)
+    assert report.input_spikes == 4 and report.rows_out == len(tr) - 4
+    assert report.cuts == 2 and "4 rows with an input spike" in report.summary()
+
+
+def test_column_names_that_cannot_be_variables_are_refused_in_one_line(other_clean, tmp_path):
+    path = tmp_path / "units.csv"
+    path.write_text(_csv_text(other_clean[0], header=["t", "y (m)", *PS[1:], *PI]))
+    with pytest.raises(ValueError, match=r"column name\(s\) \['y \(m\)'\] cannot name variables"):
+        load_data([path], system=None)
+
+
 def test_load_data_names_the_file_that_is_too_short_or_logs_other_variables(other_clean, tmp_path):
     good = str(write_trajectory_csv(tmp_path / "good.csv", other_clean[0]))
     tr = other_clean[1]
