@@ -741,8 +741,11 @@ def _float_columns(
         elif pa.types.is_null(column.type):  # every cell empty
             out[name] = np.full(len(column), np.nan)
             continue
-        elif name == time and time_unit != 1.0 and len(column) and (
-            pa.types.is_integer(column.type) or pa.types.is_floating(column.type)
+        elif (
+            name == time
+            and time_unit != 1.0
+            and len(column)
+            and (pa.types.is_integer(column.type) or pa.types.is_floating(column.type))
         ):  # from the earliest value (epoch milliseconds stay exact in int64)
             column = pc.subtract(column, pc.min(column))
             scale = time_unit

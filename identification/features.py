@@ -75,17 +75,33 @@ Term = tuple[Factor, ...]
 """A feature in canonical form; the empty tuple is the constant 1."""
 
 
+_GREEK = {
+    "alpha", "beta", "gamma", "delta", "epsilon", "zeta", "eta", "theta", "iota", "kappa",
+    "lambda", "mu", "nu", "xi", "pi", "rho", "sigma", "tau", "upsilon", "phi", "chi", "psi",
+    "omega", "Gamma", "Delta", "Theta", "Lambda", "Xi", "Pi", "Sigma", "Phi", "Psi", "Omega",
+}  # fmt: skip
+
+
+def _latex_symbol(text: str, subscript: bool = True) -> str:
+    """A name as one symbol: Greek letters as such, one letter in italics, words upright."""
+    digits = re.fullmatch(r"([A-Za-z]+)(\d+)", text)
+    if digits and subscript:  # u1 -> u_{1}
+        return f"{_latex_symbol(digits.group(1))}_{{{digits.group(2)}}}"
+    if text in _GREEK:
+        return f"\\{text}"
+    return text if len(text) <= 1 else "\\mathrm{" + text.replace("_", "\\_") + "}"
+
+
 def _latex_var(var: str) -> str:
-    greek = {"phi", "theta", "psi", "omega"}
     base, _, sub = var.partition("_")
-    out = f"\\{base}" if base in greek else base
+    out = _latex_symbol(base, subscript=sub in ("", "dot", "ddot"))
     if sub == "dot":
         return f"\\dot{{{out}}}"
     if sub == "ddot":
         return f"\\ddot{{{out}}}"
     if sub.isdigit():
         return f"{out}_{{{sub}}}"
-    return out if not sub else f"{out}_{{{sub}}}"
+    return out if not sub else f"{out}_{{{_latex_symbol(sub)}}}"
 
 
 def parse_term(name: str, variables: Sequence[str] | None = None) -> Term:

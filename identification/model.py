@@ -157,12 +157,20 @@ class IdentifiedModel:
 
     # -- simulation -------------------------------------------------------------------
     def simulate(
-        self, x0: np.ndarray, inputs: np.ndarray, dt: float, substeps: int = 1
+        self, x0: np.ndarray, inputs: np.ndarray, dt: float | np.ndarray, substeps: int = 1
     ) -> np.ndarray:
-        """Open loop: RK4 with each input held for dt. Returns states, shape (len(inputs)+1, n).
+        """Open loop by RK4, input row k over step k. Returns states, shape (len(inputs)+1, n).
 
-        Inputs the model was identified with as measured signals (``meta.measured_inputs``)
-        are interpolated within each step as in the fit (the last step holds them).
+        Args:
+            x0: Initial state.
+            inputs: One row per step.
+            dt: The step, or one step per input row (a log's own steps, jitter and all:
+                ``np.diff(t, append=2 * t[-1] - t[-2])``).
+            substeps: RK4 substeps per step.
+
+        Commands are held over their step. Inputs the model was identified with as measured
+        signals (``meta.measured_inputs``) are interpolated within each step as in the fit
+        (the last step holds them).
         """
         x0 = np.asarray(x0, dtype=np.float64)
         inputs = np.atleast_2d(np.asarray(inputs, dtype=np.float64))
@@ -172,6 +180,14 @@ class IdentifiedModel:
             raise ValueError(
                 f"inputs must have {len(self.input_names)} columns, got {inputs.shape}"
             )
+        steps = np.asarray(dt, dtype=np.float64)
+        if steps.ndim == 0:
+            steps = np.full(len(inputs), float(steps))
+        if steps.shape != (len(inputs),) or not np.all(np.isfinite(steps) & (steps > 0)):
+            raise ValueError(
+                f"dt must be one positive step or one per input row ({len(inputs)}), got "
+                f"{np.asarray(dt).ravel()[:5]} (shape {np.shape(dt)})"
+            )
         out = np.empty((len(inputs) + 1, x0.size))
         out[0] = x = x0
         measured = [self.input_names.index(n) for n in self.meta.get("measured_inputs", ())]
@@ -179,18 +195,17 @@ class IdentifiedModel:
             from identification.data import stage_inputs
             from identification.fit import rk4_steps
 
-            t = np.arange(len(inputs)) * dt
+            t = np.concatenate([[0.0], np.cumsum(steps[:-1])])
             rows = np.arange(len(inputs) - 1)
             stages = stage_inputs(t, inputs, rows, measured)
-            h = np.full(1, dt)
             for k in rows:
-                x = rk4_steps(self.rhs, x[None, :], tuple(s[k : k + 1] for s in stages), h,
-                              substeps)[0]  # fmt: skip
+                x = rk4_steps(self.rhs, x[None, :], tuple(s[k : k + 1] for s in stages),
+                              steps[k : k + 1], substeps)[0]  # fmt: skip
                 out[k + 1] = x
-            out[-1] = rk4_step(self.rhs, x, inputs[-1], dt, substeps)  # no later sample: held
+            out[-1] = rk4_step(self.rhs, x, inputs[-1], steps[-1], substeps)  # held: no later row
             return out
         for k, u in enumerate(inputs):
-            x = rk4_step(self.rhs, x, u, dt, substeps)
+            x = rk4_step(self.rhs, x, u, steps[k], substeps)
             out[k + 1] = x
         return out
 
@@ -222,8 +237,16 @@ class IdentifiedModel:
             raise ValueError(
                 f"{source}: a model file holds a JSON object, got {type(data).__name__}"
             )
+        if data.get("schema") == "quad-sindy/rotorcraft":
+            raise ValueError(
+                f"{source}: a rotorcraft model (motor speeds to rigid body), not an identified "
+                "SINDy model: load it with identification.rotorcraft.load_rotorcraft"
+            )
         if data.get("schema") != SCHEMA:
-            raise ValueError(f"{source}: not a quad-sindy model (schema {data.get('schema')!r})")
+            raise ValueError(
+                f"{source}: not a model written by quad-sindy identify (schema "
+                f"{data.get('schema')!r}, expected {SCHEMA!r})"
+            )
         version = data.get("schema_version")
         if version != SCHEMA_VERSION:
             raise ValueError(

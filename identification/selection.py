@@ -154,6 +154,8 @@ class SelectionReport:
         warnings: Near-collinear pairs resolved, dropped terms, optimizer warnings.
         hold: The score of holding the state (every derivative zero) on the same folds: the
             yardstick a score is read against.
+        final_terms: Terms of the returned model: the chosen candidate's support after the
+            refit on all data, growth, pruning and bootstrap checks.
     """
 
     candidates: list[Candidate]
@@ -163,6 +165,7 @@ class SelectionReport:
     rule: str
     warnings: list[str] = field(default_factory=list)
     hold: float = float("nan")
+    final_terms: int | None = None
 
     @property
     def best(self) -> Candidate:
@@ -180,6 +183,7 @@ class SelectionReport:
                            "n_terms": self.best.n_terms, "score": self.best.mean,
                            "se": self.best.se},
                 "hold_score": self.hold,
+                "final_terms": self.final_terms,
                 "candidates": [
                     {"window": c.window, "lambda": c.lam, "n_terms": c.n_terms,
                      "score": c.mean, "se": c.se}
@@ -195,6 +199,7 @@ class SelectionReport:
 
         matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
+        from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
         from quad_envs.fileio import atomic_write_bytes
 
@@ -206,10 +211,16 @@ class SelectionReport:
                             yerr=[c.se for c in cs], fmt="o", ms=4, capsize=2,
                             label=f"window {w}")  # fmt: skip
         b = self.best
-        ax.plot([b.n_terms], [b.mean], "r*", ms=16, label=f"chosen: {b.n_terms} terms")
+        final = self.final_terms
+        after = f" (model after the checks: {final})" if final not in (None, b.n_terms) else ""
+        ax.plot([b.n_terms], [b.mean], "r*", ms=16, label=f"chosen: {b.n_terms} terms{after}")
         ax.axhline(b.mean + b.se, color="0.6", lw=0.8, ls="--")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        # term counts as plain integers (1, 2, 5, 10, ...); no crowded minor labels (3x10^0)
+        ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel("terms in the model (fit on all data)")
         ax.set_ylabel(f"held-out {self.horizon}-step prediction error (normalised)")
         ax.set_title("Model selection: cross-validated prediction error")
@@ -911,6 +922,7 @@ def select_model(
         report.warnings += dropped
     if not np.any(xi):
         raise ValueError(_empty_model_message(candidates))
+    report.final_terms = int(np.count_nonzero(xi))
     tally = TALLY.summary()
     if tally:
         report.warnings.append(tally)

@@ -7,12 +7,13 @@ Outputs are checked for writability before any long computation starts.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -324,10 +325,13 @@ def identify(
     from identification.data import PRESET_ANGLES, load_data
     from identification.fit import FitConfig, fit
     from identification.libraries import library_from_spec, spec_angles
-    from identification.selection import WINDOWS, select_model
+    from identification.selection import WINDOWS, select_model, typical_length
 
     def split(text: str | None) -> list[str] | None:
         return [c.strip() for c in text.split(",") if c.strip()] if text else None
+
+    lam_value = _number_option("--lambda", lam, float, low=0.0) if lam != "auto" else None
+    window_value = _number_option("--window", window, int, low=1) if window != "auto" else None
 
     try:
         preset = system.value if system else None
@@ -370,11 +374,13 @@ def identify(
 
             if preset != "planar":
                 _fail("the paper's method is defined for the planar system only")
-            model = fit_paper(trajs, PAPER_LAMBDA if lam == "auto" else float(lam))
+            model = fit_paper(trajs, PAPER_LAMBDA if lam_value is None else lam_value)
         else:
             lib = library_from_spec(
                 library or preset, first.state_names, first.input_names, declared
             )
+            for note in _degree_notes(trajs, lib):
+                typer.echo(note)
             looks = [n for n in first.state_names if _looks_like_angle(n)]
             if looks and not declared and preset is None:
                 typer.echo(
@@ -404,7 +410,12 @@ def identify(
             config = FitConfig(derivative=method, optimizer=optimizer)
             label = preset or (library if library in ("planar", "quad6dof") else None)
             if lam == "auto":
-                windows = WINDOWS if window == "auto" else (int(window),)
+                windows = WINDOWS if window_value is None else (window_value,)
+                if window_value is not None and window_value >= max(typical_length(trajs) // 4, 2):
+                    _fail(
+                        f"--window {window_value} does not fit the data: windows must be under "
+                        f"a quarter of the typical segment ({typical_length(trajs)} rows)"
+                    )
                 model, report = select_model(
                     trajs, lib, config=config, windows=windows, system=label, progress=True
                 )
@@ -412,18 +423,17 @@ def identify(
                 if library_note:
                     typer.echo(library_note)
                 typer.echo(
-                    f"selection: window {best.window}, lambda {best.lam:g}, {model.n_terms} "
+                    f"selection: window {best.window}, lambda {best.lam:g}, {best.n_terms} "
                     f"terms (score {best.mean:.3g} +- {best.se:.2g}, holding the state "
                     f"{report.hold:.3g}: {report.horizon}-step prediction error over each "
                     f"state's spread; {report.folds} folds)"
+                    + _after_checks(best.n_terms, model.n_terms)
                 )
                 for note in report.warnings:
                     typer.echo(f"warning: {note}")
                 report.plot(plot or out.with_suffix(".png"))
             else:
-                config = dataclasses.replace(
-                    config, lam=float(lam), window=1 if window == "auto" else int(window)
-                )
+                config = dataclasses.replace(config, lam=lam_value, window=window_value or 1)
                 model = fit(trajs, lib, config, label)
                 if library_note:
                     typer.echo(library_note)
@@ -441,23 +451,91 @@ def show(
     latex: Annotated[bool, typer.Option(help="LaTeX instead of plain text")] = False,
     precision: Annotated[int, typer.Option(help="significant digits")] = 6,
 ) -> None:
-    """Prints a model's equations with each coefficient's spread and inclusion probability."""
+    """Prints a model's equations with each coefficient's spread and inclusion probability.
+
+    Identified models (``identify``) and rotorcraft models (``benchmark nanodrone``); with
+    ``--latex`` the notes below the equations are LaTeX comments.
+    """
     from identification.model import load_model
+    from identification.rotorcraft import SCHEMA as ROTORCRAFT
+    from identification.rotorcraft import load_rotorcraft
 
     try:
+        if _schema_of(model) == ROTORCRAFT:
+            if latex:
+                _fail(f"{model}: a rotorcraft model is shown as text only (leave out --latex)")
+            typer.echo("\n".join(load_rotorcraft(model).equations(precision=precision)))
+            return
         loaded = load_model(model)
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc))
     typer.echo("\n".join(loaded.equations(precision=precision, latex=latex)))
+    note = "% " if latex else ""
     sel = loaded.meta.get("selection")
     if sel:
         chosen = sel["chosen"]
         typer.echo(
-            f"selected: window {chosen['window']}, lambda {chosen['lambda']:g}, "
-            f"{chosen['n_terms']} terms; rule: {sel['rule']}"
+            f"{note}selected: window {chosen['window']}, lambda {chosen['lambda']:g}, "
+            f"{chosen['n_terms']} terms{_after_checks(chosen['n_terms'], loaded.n_terms)}; "
+            f"rule: {sel['rule']}"
         )
-        for note in sel.get("warnings", []):
-            typer.echo(f"warning: {note}")
+        for warning in sel.get("warnings", []):
+            typer.echo(f"{note}warning: {warning}")
+
+
+def _schema_of(path: Path) -> str | None:
+    """The ``schema`` field of a JSON model file (None when it has none or is not JSON)."""
+    import json
+
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return data.get("schema") if isinstance(data, dict) else None
+
+
+def _degree_notes(trajs: list[Any], library: list[str]) -> list[str]:
+    """Notes for variables inside sin/cos/tan/sec that reach past 2 pi: logged in degrees?"""
+    import numpy as np
+
+    from identification.features import parse_term
+
+    first = trajs[0]
+    names = [*first.state_names, *first.input_names]
+    inside = {f.var for term in library for f in parse_term(term) if f.kind in TRIG_KINDS}
+    notes = []
+    for j, name in enumerate(names):
+        if name in inside:
+            column = j if j < len(first.state_names) else j - len(first.state_names)
+            field = "x" if j < len(first.state_names) else "u"
+            peak = max(float(np.nanmax(np.abs(getattr(t, field)[:, column]))) for t in trajs)
+            if peak > 2 * math.pi:
+                notes.append(
+                    f"note: {name} reaches {peak:.3g} inside sin/cos: angles are in radians "
+                    "(a log in degrees gives wrong models; an angle that turns several times "
+                    "is fine)"
+                )
+    return notes
+
+
+TRIG_KINDS = ("sin", "cos", "tan", "sec")
+
+
+def _number_option(flag: str, text: str, kind: type, low: float) -> Any:
+    """A numeric option's value (``auto`` handled by the caller), or a one-line error."""
+    try:
+        value = kind(text)
+    except ValueError:
+        value = None
+    if value is None or not value >= low or (kind is float and not math.isfinite(value)):
+        what = "an integer" if kind is int else "a number"
+        _fail(f"{flag} takes 'auto' or {what} >= {low:g}, got {text!r}")
+    return value
+
+
+def _after_checks(chosen: int, final: int) -> str:
+    """Where the written model's term count differs from the chosen candidate's."""
+    return f"; the model has {final} after the refit checks" if final != chosen else ""
 
 
 @app.command()

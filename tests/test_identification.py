@@ -174,6 +174,25 @@ def test_rollouts_record_applied_inputs():
     np.testing.assert_allclose(states, trajs[0].x, atol=1e-9)
 
 
+def test_simulate_takes_each_rows_own_step():
+    """A log's jittery steps: step k lasts dt[k] (a fixed step only, before)."""
+    model = model_from_truth("planar")
+    rng = np.random.default_rng(0)
+    u = PAPER_PLANAR.mass * 9.81 * np.array([1.0, 0.0]) + rng.normal(0, 0.05, size=(40, 2))
+    x0 = np.array([0.0, 1.0, 0.05, 0.1, 0.0, 0.2])
+    steps = 0.01 * (1 + 0.3 * rng.uniform(-1, 1, size=40))
+    whole = model.simulate(x0, u, steps)
+    # the same as stepping row by row, each with its own step
+    x = x0
+    for k in range(40):
+        x = model.simulate(x, u[k : k + 1], steps[k])[-1]
+        np.testing.assert_allclose(whole[k + 1], x, rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(model.simulate(x0, u, np.full(40, 0.01)),
+                                  model.simulate(x0, u, 0.01))  # fmt: skip
+    with pytest.raises(ValueError, match="one per input row"):
+        model.simulate(x0, u, steps[:-1])
+
+
 # -- fitting ----------------------------------------------------------------------------
 def _check(model, truth, names, rel):
     comp = compare_coefficients(model.coefficients, truth, names, model.feature_names)

@@ -142,6 +142,40 @@ def test_cli_identify_any_names_and_show(tmp_path, other_clean):
     assert shown.exit_code == 0 and "P=1.00" in shown.output and "selected:" in shown.output
     latex = CliRunner().invoke(app, ["show", str(out), "--latex"])
     assert "\\pm" in latex.output
+    # pasteable: words upright, the notes as comments (a real log's names broke LaTeX)
+    assert "\\dot{\\mathrm{roll}}" in latex.output and "\\mathrm{thrust}" in latex.output
+    assert all(ln.startswith(("\\dot", "%")) for ln in latex.output.splitlines() if ln)
+    # options a new user mistyped: one line naming the option, nothing written
+    for flag, value in (("--window", "0"), ("--window", "5000"), ("--lambda", "abc")):
+        bad = CliRunner().invoke(app, [*args[:-2], flag, value, "--out", str(tmp_path / "x.json")])
+        assert bad.exit_code == 2 and bad.output.startswith(f"error: {flag}"), bad.output
+    assert not (tmp_path / "x.json").exists()
+    # angles logged in degrees get a note
+    degrees = []
+    for i, tr in enumerate(other_clean):
+        x = tr.x.copy()
+        x[:, 2] = np.degrees(x[:, 2])
+        renamed = Trajectory(tr.t, x, tr.u, ("a", "b", "roll", "a_dot", "b_dot", "roll_dot"),
+                             ("thrust", "moment"))  # fmt: skip
+        degrees.append(str(write_trajectory_csv(tmp_path / f"deg{i}.csv", renamed)))
+    noted = CliRunner().invoke(app, ["identify", *degrees, "--out", str(tmp_path / "d.json"),
+                                     "--inputs", "thrust,moment", "--library",
+                                     "degree=1;angles=roll", "--lambda", "0.001"])  # fmt: skip
+    assert "note: roll reaches" in noted.output and "radians" in noted.output
+
+
+def test_show_reads_a_rotorcraft_model_and_names_what_a_file_is(tmp_path):
+    from identification.rotorcraft import DYNAMIC_STATES, FEATURE_NAMES, RotorcraftModel
+
+    coefficients = np.zeros((len(DYNAMIC_STATES), len(FEATURE_NAMES)))
+    coefficients[2, FEATURE_NAMES.index("W")] = 8.3e-7
+    path = RotorcraftModel(coefficients, tau=0.04).save(tmp_path / "rotor.json")
+    shown = CliRunner().invoke(app, ["show", str(path)])
+    assert shown.exit_code == 0 and "w' = q u - p v + 8.3e-07 W" in shown.output, shown.output
+    latex = CliRunner().invoke(app, ["show", str(path), "--latex"])
+    assert latex.exit_code == 2 and "text only" in latex.output
+    with pytest.raises(ValueError, match="a rotorcraft model .*load_rotorcraft"):
+        load_model(path)
 
 
 def test_a_short_fragment_does_not_cap_the_window_and_horizon(other_clean):
@@ -168,9 +202,9 @@ def test_one_short_log_is_cut_into_two_blocks_or_refused(other_clean):
 @pytest.mark.parametrize(
     ("spec", "message"),
     [
-        ('degree = 1.5', "degree must be an integer, got 1.5"),
+        ("degree = 1.5", "degree must be an integer, got 1.5"),
         ('trig_products = "maybe"', "trig_products must be true or false"),
-        ('angles = [1]', "angles must be a list of names"),
+        ("angles = [1]", "angles must be a list of names"),
     ],
 )
 def test_library_toml_values_of_the_wrong_type_are_named(tmp_path, spec, message):
@@ -394,7 +428,8 @@ def test_stage_inputs_hold_commands_and_follow_a_measured_cubic_on_jittery_steps
 def _csv_text(tr: Trajectory, delimiter: str = ",", header: list[str] | None = None) -> str:
     names = header or ["t", *PS, *PI]
     rows = np.column_stack([tr.t, tr.x, tr.u])
-    return "\n".join([delimiter.join(names)] + [delimiter.join(map(repr, r)) for r in rows.tolist()])
+    lines = [delimiter.join(map(repr, r)) for r in rows.tolist()]
+    return "\n".join([delimiter.join(names), *lines])
 
 
 @pytest.mark.parametrize(
@@ -419,9 +454,12 @@ def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
         text = "\n".join([lines[0] + ",mode"] + [ln + ",hover" for ln in lines[1:]])
     elif variant == "iso_time":
         stamps = np.datetime64("2026-11-25T10:00:00") + np.round(tr.t * 1e6).astype(
-            "timedelta64[us]")
-        text = "\n".join([lines[0]] + [f"{s}," + ln.split(",", 1)[1]
-                                        for s, ln in zip(stamps, lines[1:], strict=True)])
+            "timedelta64[us]"
+        )
+        text = "\n".join(
+            [lines[0]]
+            + [f"{s}," + ln.split(",", 1)[1] for s, ln in zip(stamps, lines[1:], strict=True)]
+        )
     path = tmp_path / "log.csv"
     path.write_text(text, encoding="utf-8")
     segs, report = load_data([path], system="planar")
