@@ -588,10 +588,9 @@ def resolve_names(
         both = set(st) & set(inp)
         if both:
             raise ValueError(f"column(s) {sorted(both)} named as both state and input")
-    if not st or not inp:
+    if not st:
         raise ValueError(
-            f"no states or no inputs among the columns {cols}: name them with --states and "
-            "--inputs (states=, inputs= in Python)"
+            f"no states among the columns {cols}: name them with --states (states= in Python)"
         )
     unusable = [c for c in (*st, *inp) if not re.fullmatch(r"[A-Za-z_]\w*", c)]
     if unusable:
@@ -991,6 +990,9 @@ def load_data(
         if not segs:
             raise ValueError(f"{path}: no trajectories in the file")
         variables = (*segs[0].state_names, *segs[0].input_names)
+        if first is not None and variables != first[1] and set(variables) == set(first[1]):
+            segs = [_reorder(sg, trajs[0]) for sg in segs]  # the same columns, another order
+            variables = first[1]
         if first is None:
             first = (str(path), variables)
         elif variables != first[1]:
@@ -1008,6 +1010,17 @@ def load_data(
                 "are their time columns in the same unit? (--time-unit; time_unit= in Python)"
             )
     return trajs, report
+
+
+def _reorder(seg: Trajectory, like: Trajectory) -> Trajectory:
+    """``seg`` with its states and inputs in the order of ``like`` (the same names)."""
+    names = [*seg.state_names, *seg.input_names]
+    both = np.column_stack([seg.x, seg.u])
+    states = both[:, [names.index(n) for n in like.state_names]]
+    inputs = both[:, [names.index(n) for n in like.input_names]]
+    measured = tuple(n for n in like.input_names if n in seg.measured)
+    return Trajectory(seg.t, states, inputs, like.state_names, like.input_names, seg.refs,
+                      seg.meta, seg.missing, measured)  # fmt: skip
 
 
 STEP_RATIO = 100.0

@@ -151,7 +151,12 @@ def _parse_factors(name: str) -> Term:
             continue
         power = _POWER.match(token)
         if not power:
-            raise ValueError(f"cannot parse factor {token!r} in feature {name!r}")
+            raise ValueError(
+                f"cannot parse factor {token!r} in feature {name!r}: a feature is factors "
+                "separated by spaces, each a variable with a whole power (x, x^2), sin, cos, "
+                "tan or sec of a whole multiple of one (sin(x), cos(2 x)), abs(x) or "
+                "norm(x y)"
+            )
         var, k = power.group(1), int(power.group(2) or 1)
         powers[var] = powers.get(var, 0) + k
     factors = [Factor(v, "pow", k) for v, k in powers.items()] + trig

@@ -450,6 +450,14 @@ def check_identifiable(
                     f"{with_input[:4]} cannot be told from the others: record data in which "
                     f"{name} varies (e.g. add excitation to it)"
                 )
+        same = _same_signals(trajs)
+        if same:
+            a, b = same
+            raise ValueError(
+                f"variables {a!r} and {b!r} are the same signal on this data (one is an exact "
+                f"scaled and shifted copy of the other), so no term can tell them apart: drop "
+                "one, or record data in which they differ"
+            )
     norm = gram.col_norms
     zero = [names[j] for j in np.flatnonzero(norm <= 0)]
     if zero:
@@ -468,6 +476,22 @@ def check_identifiable(
             "independently (other inputs, larger angles), or remove all but one of them"
         )
     return {"condition": float(1.0 / ratio)}
+
+
+def _same_signals(trajs: Sequence[Trajectory]) -> tuple[str, str] | None:
+    """Two variables that are exact affine copies of each other on the data, if any."""
+    names = [*trajs[0].state_names, *trajs[0].input_names]
+    both = np.concatenate([np.column_stack([tr.x, tr.u]) for tr in trajs])
+    centred = both - both.mean(axis=0)
+    norms = np.linalg.norm(centred, axis=0)
+    moving = np.flatnonzero(norms > 1e-12 * (1.0 + np.abs(both).max(axis=0)) * np.sqrt(len(both)))
+    unit = centred[:, moving] / norms[moving]
+    cos = np.abs(unit.T @ unit)
+    np.fill_diagonal(cos, 0.0)
+    i, j = np.unravel_index(int(np.argmax(cos)), cos.shape) if cos.size else (0, 0)
+    if cos.size and cos[i, j] > 1.0 - 1e-12:
+        return names[moving[min(i, j)]], names[moving[max(i, j)]]
+    return None
 
 
 # -- sparse regression ------------------------------------------------------------------
@@ -720,7 +744,19 @@ def fit(
         parse_term(n, [*first.state_names, *first.input_names])
     base = Gram.stack(grams(trajs, names, "forward", 1))
     conditioning = check_identifiable(base, names, trajs)
+    window = max(int(config.window), 1)
+    rows = sum(len(t) - window for t in trajs if len(t) > window)
+    if window > 1 and rows < len(names):
+        raise ValueError(
+            f"window {window} leaves only {rows} regression rows for a library of {len(names)} "
+            "terms: use a shorter window (--window), or record longer segments"
+        )
     xi = fit_coefficients(trajs, list(feature_names), config)
+    if not np.any(xi):
+        raise ValueError(
+            f"the model has no term: at lambda {config.lam:g} every term falls below the "
+            "threshold; lower --lambda (lam= in Python) or let --lambda auto choose it"
+        )
     meta = {
         **config.label,
         "n_trajectories": len(trajs),

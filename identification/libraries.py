@@ -292,7 +292,7 @@ def library_from_spec(
             for name in names:
                 parse_term(name, variables)  # raises naming a variable the data lack
             return names
-        if spec.endswith(".toml"):
+        if spec.lower().endswith(".toml"):
             return LibrarySpec(**_read_toml(Path(spec), angles)).build(state_names, input_names)
         fields = _parse_spec_text(spec)
         fields.setdefault("angles", tuple(angles))
@@ -305,7 +305,8 @@ def spec_angles(spec: str | None) -> tuple[str, ...]:
     """The angles a spec string or TOML file declares (none for presets and None)."""
     if not spec or spec in PRESETS:
         return ()
-    fields = _read_toml(Path(spec), ()) if spec.endswith(".toml") else _parse_spec_text(spec)
+    toml = spec.lower().endswith(".toml")
+    fields = _read_toml(Path(spec), ()) if toml else _parse_spec_text(spec)
     return tuple(fields.get("angles", ()))  # type: ignore[arg-type]
 
 

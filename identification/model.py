@@ -173,7 +173,10 @@ class IdentifiedModel:
         (the last step holds them).
         """
         x0 = np.asarray(x0, dtype=np.float64)
-        inputs = np.atleast_2d(np.asarray(inputs, dtype=np.float64))
+        inputs = np.asarray(inputs, dtype=np.float64)
+        if inputs.ndim == 1 and len(self.input_names) == 1:
+            inputs = inputs[:, None]  # one input: a plain sequence of its values
+        inputs = np.atleast_2d(inputs)
         if x0.shape != (len(self.state_names),):
             raise ValueError(f"x0 must have shape ({len(self.state_names)},), got {x0.shape}")
         if inputs.shape[1] != len(self.input_names):

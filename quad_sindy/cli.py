@@ -342,9 +342,13 @@ def identify(
             and library in ("planar", "quad6dof")
         ):
             preset = library
-        declared = (
-            split(angles) or list(spec_angles(library)) or list(PRESET_ANGLES.get(preset or "", ()))
-        )
+        in_spec = list(spec_angles(library))
+        if split(angles) and in_spec and set(split(angles) or ()) != set(in_spec):
+            _fail(
+                f"--angles {angles} and the library's angles={','.join(in_spec)} disagree: "
+                "declare the angles once"
+            )
+        declared = split(angles) or in_spec or list(PRESET_ANGLES.get(preset or "", ()))
         read = (data, split(columns), preset, split(states), split(inputs), time.strip())
         unit = SECONDS_PER[time_unit.value]
         trajs, cleaning = load_data(*read, angles=declared, measured=split(measured) or (),
@@ -426,7 +430,7 @@ def identify(
                     f"selection: window {best.window}, lambda {best.lam:g}, {best.n_terms} "
                     f"terms (score {best.mean:.3g} +- {best.se:.2g}, holding the state "
                     f"{report.hold:.3g}: {report.horizon}-step prediction error over each "
-                    f"state's spread; {report.folds} folds)"
+                    f"state's scale; {report.folds} folds)"
                     + _after_checks(best.n_terms, model.n_terms)
                 )
                 for note in report.warnings:
@@ -449,7 +453,7 @@ def identify(
 def show(
     model: Annotated[Path, typer.Argument(help="identified model JSON")],
     latex: Annotated[bool, typer.Option(help="LaTeX instead of plain text")] = False,
-    precision: Annotated[int, typer.Option(help="significant digits")] = 6,
+    precision: Annotated[int, typer.Option(help="significant digits", min=1, max=17)] = 6,
 ) -> None:
     """Prints a model's equations with each coefficient's spread and inclusion probability.
 

@@ -295,7 +295,7 @@ def test_model_round_trip_and_pickle(tmp_path, case_c):
     [
         (lambda d: "{not json", "malformed JSON"),
         (lambda d: json.dumps([1, 2]), "JSON object"),
-        (lambda d: json.dumps({**d, "schema": "other"}), "not a quad-sindy model"),
+        (lambda d: json.dumps({**d, "schema": "other"}), "not a model written by quad-sindy"),
         (lambda d: json.dumps({**d, "schema_version": 99}), "schema_version"),
         (lambda d: json.dumps({**d, "coefficients": d["coefficients"][:-1]}), "shape"),
         (

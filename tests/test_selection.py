@@ -100,9 +100,13 @@ def test_constant_input_is_refused(other_clean):
 def test_collinear_columns_are_refused_naming_them(other_clean):
     tr = other_clean[0]
     x = tr.x.copy()
-    x[:, 1] = 2.0 * x[:, 0] + 1.0  # z = 2 y + 1: '1', 'y', 'z' are collinear
-    lib = library_from_spec("degree=1", PS, PI)
+    x[:, 1] = x[:, 0] ** 2  # z = y^2: the terms 'z' and 'y^2' are one column
+    lib = library_from_spec("degree=2", PS, PI)
     with pytest.raises(ValueError, match=r"terms \[.*'z'.*\] are exactly collinear"):
+        fit([Trajectory(tr.t, x, tr.u, PS, PI)], lib, FitConfig())
+    # a variable that copies another is named as such, not through the terms it spoils
+    x[:, 1] = 2.0 * x[:, 0] + 1.0
+    with pytest.raises(ValueError, match="variables 'y' and 'z' are the same signal"):
         fit([Trajectory(tr.t, x, tr.u, PS, PI)], lib, FitConfig())
 
 
@@ -162,6 +166,65 @@ def test_cli_identify_any_names_and_show(tmp_path, other_clean):
                                      "--inputs", "thrust,moment", "--library",
                                      "degree=1;angles=roll", "--lambda", "0.001"])  # fmt: skip
     assert "note: roll reaches" in noted.output and "radians" in noted.output
+
+
+def test_wrong_settings_and_copied_variables_are_refused_naming_the_cause(other_clean, tmp_path):
+    """New-user trials: each of these wrote a model with exit 0, or refused naming the wrong
+    terms."""
+    lib = planar_library()
+    with pytest.raises(ValueError, match="the model has no term: at lambda 1e.09"):
+        fit(other_clean, lib, FitConfig(lam=1e9))
+    with pytest.raises(ValueError, match="window 595 leaves only 15 regression rows"):
+        fit(other_clean, lib, FitConfig(lam=1e-3, window=595))
+    copied = [Trajectory(tr.t, tr.x, np.column_stack([tr.u, 2 * tr.u[:, 0] + 1]), PS,
+                         (*PI, "u3")) for tr in other_clean]  # fmt: skip
+    library = library_from_spec("degree=1;angles=phi", PS, (*PI, "u3"))
+    with pytest.raises(ValueError, match="variables 'u1' and 'u3' are the same signal"):
+        fit(copied, library, FitConfig(lam=1e-3))
+    with pytest.raises(ValueError, match="factors separated by spaces"):
+        library_from_spec("degree=1;extra=exp(y)", PS, PI)
+    # the same columns in another order are the same variables
+    first = str(write_trajectory_csv(tmp_path / "a.csv", other_clean[0]))
+    tr = other_clean[1]
+    order = [2, 0, 1, 5, 3, 4]
+    other = Trajectory(tr.t, tr.x[:, order], tr.u[:, ::-1], tuple(PS[i] for i in order),
+                       PI[::-1])  # fmt: skip
+    second = str(write_trajectory_csv(tmp_path / "b.csv", other))
+    segs, _ = load_data([first, second], system=None, states=None, inputs=None)
+    assert segs[1].state_names == PS and np.array_equal(segs[1].x, tr.x)
+    assert np.array_equal(segs[1].u, tr.u)
+
+
+def test_a_system_without_inputs_is_identified_exactly(tmp_path):
+    """Any system includes autonomous ones (refused before: 'no states or no inputs')."""
+    from scipy.integrate import solve_ivp
+
+    def lorenz(_, s):
+        a, b, c = s
+        return [10 * (b - a), a * (28 - c) - b, a * b - 8 / 3 * c]
+
+    rng = np.random.default_rng(1)
+    paths = []
+    for i in range(3):
+        t = np.arange(600) * 0.01
+        x0 = rng.normal(0, 8, 3) + [0, 0, 25]
+        sol = solve_ivp(lorenz, (0, t[-1]), x0, t_eval=t, rtol=1e-11, atol=1e-11,
+                        method="DOP853")  # fmt: skip
+        path = tmp_path / f"lorenz{i}.csv"
+        path.write_text(_csv_text(Trajectory(t, sol.y.T, np.zeros((600, 0)), ("a", "b", "c"), ()),
+                                  header=["t", "a", "b", "c"]))  # fmt: skip
+        paths.append(str(path))
+    out = tmp_path / "m.json"
+    result = CliRunner().invoke(app, ["identify", *paths, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    model = load_model(out)
+    truth = {(0, "a"): -10, (0, "b"): 10, (1, "a"): 28, (1, "b"): -1, (1, "a c"): -1,
+             (2, "c"): -8 / 3, (2, "a b"): 1}  # fmt: skip
+    found = {(i, model.feature_names[j]): model.coefficients[i, j]
+             for i, j in zip(*np.nonzero(model.coefficients), strict=True)}  # fmt: skip
+    assert set(found) == set(truth) and model.input_names == ()
+    assert all(abs(found[k] / truth[k] - 1) < 1e-4 for k in truth)
+    assert model.simulate(sol.y[:, 0], np.zeros((10, 0)), 0.01).shape == (11, 3)
 
 
 def test_show_reads_a_rotorcraft_model_and_names_what_a_file_is(tmp_path):
@@ -1110,11 +1173,19 @@ def test_the_empty_model_must_also_be_within_one_paired_standard_error():
 
     folds = np.array([0.30, 0.50, 0.40, 0.20, 0.25])
     best = Candidate(1, 0.1, 3, list(folds))
-    trailing = Candidate(1, 1.0, 0, list(folds + 0.03))
+    trailing = Candidate(1, 1.0, 0, list(folds + 0.03), empty=(0, 1))
     assert trailing.mean <= best.mean + best.se  # the unpaired rule alone would take it
     assert choose_one_se([best, trailing]) == 0
-    noisy = Candidate(1, 1.0, 0, list(folds + np.array([0.06, -0.05, 0.07, -0.04, 0.01])))
+    noisy = Candidate(1, 1.0, 0, list(folds + np.array([0.06, -0.05, 0.07, -0.04, 0.01])),
+                      empty=(0, 1))  # fmt: skip
     assert choose_one_se([best, noisy]) == 1
+    # the same for a sparser candidate that holds one state the best one moves (a unicycle
+    # at 5 % noise: px' = py' = 0 won over the exact model); one that moves every state the
+    # best moves is judged by the plain rule
+    holds_one = Candidate(1, 0.3, 1, list(folds + 0.03), empty=(0,))
+    assert choose_one_se([best, holds_one]) == 0
+    moves_all = Candidate(1, 0.3, 2, list(folds + 0.03))
+    assert choose_one_se([best, moves_all]) == 1
 
 
 def test_only_the_empty_model_left_is_refused_not_returned():
@@ -1125,7 +1196,7 @@ def test_only_the_empty_model_left_is_refused_not_returned():
 
     inf = float("inf")
     diverged = [Candidate(1, lam, n, [0.5, inf, 0.4]) for lam, n in ((1e-3, 12), (1e-2, 5))]
-    empty = Candidate(1, 1.0, 0, [0.8, 0.9, 0.7])
+    empty = Candidate(1, 1.0, 0, [0.8, 0.9, 0.7], empty=(0, 1))
     with pytest.raises(ValueError, match="every candidate model with terms diverged"):
         choose_one_se([*diverged, empty])
     finite = Candidate(1, 0.1, 2, [0.3, 0.35, 0.3])
