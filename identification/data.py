@@ -228,8 +228,8 @@ class CleanReport:
         stale_rows: Rows dropped because they repeat the previous row's states (or time).
         nonfinite_rows: Rows dropped because a value is NaN or infinite.
         outlier_rows: Rows dropped as outliers (robust z-score of the state).
-        input_spikes: Rows dropped because an input spikes far outside its range for that row
-            alone (a logging glitch: a motor speed of 1e5 rad/s for one sample).
+        input_spikes: Rows dropped because an input spikes far outside its range for up to
+            3 rows (a logging glitch: a motor speed of 1e5 rad/s): :func:`_input_spikes`.
         restarts: Places where the time column jumps back and runs on (logs appended in one
             file): the log is split there, both parts kept.
         gaps: Time gaps (step > ``gap_factor`` x median step) where the log was split.
@@ -340,7 +340,10 @@ def clean(
     exact. (A log that re-sends a twentieth of its rows would otherwise fall apart into
     fragments too short to fit.) Longer runs, rows whose time or input is bad, and time gaps
     longer than ``gap_factor`` median steps split the log; segments shorter than ``min_rows``
-    are dropped. Jittery steps are kept: the fit uses each row's own step.
+    are dropped. Jittery steps are kept: the fit uses each row's own step. Where the time
+    jumps back by more than ``gap_factor`` steps (two logs appended in one file) each part is
+    cleaned on its own and both are kept; an input far outside its range for a row or three
+    (:func:`_input_spikes`) drops those rows.
 
     Args:
         t: Raw time stamps, shape (N,) (repeats and steps back are dropped as stale).

@@ -40,7 +40,8 @@ from identification.data import Trajectory, read_table
 from quad_envs.dynamics import QUAD6DOF_STATE_NAMES, rotation_zxy
 
 MOTOR_UNITS = ("rad/s", "rpm", "erpm")
-_SEQUENCE_FIELDS = {"position", "velocity", "quaternion", "euler_zxy", "rates", "motors"}
+_SEQUENCE_FIELDS = {"position", "velocity", "quaternion", "euler_zxy", "euler_zyx", "rates",
+                    "motors"}  # fmt: skip
 VELOCITY_FRAMES = ("world", "body")
 
 
@@ -54,9 +55,11 @@ class LogColumns:
         velocity: Velocity columns (x, y, z) [m/s].
         velocity_frame: ``world`` or ``body``: the frame of ``velocity``.
         quaternion: Quaternion columns in (x, y, z, w) order, body to world; or None when
-            ``euler_zxy`` is given.
-        euler_zxy: Z-X-Y Euler angle columns (roll phi, pitch theta, yaw psi) [rad], used when
-            ``quaternion`` is None.
+            Euler angles are given.
+        euler_zxy: Z-X-Y Euler angle columns (roll phi, pitch theta, yaw psi) [rad]: the
+            preset's convention, R = Rz(psi) Rx(phi) Ry(theta).
+        euler_zyx: Z-Y-X Euler angle columns (roll, pitch, yaw) [rad]: most autopilots'
+            logs, R = Rz(yaw) Ry(pitch) Rx(roll); converted to Z-X-Y.
         rates: Body angular rate columns (p, q, r) [rad/s].
         motors: One speed column per motor, in the order of the inputs ``omega1..``.
         motor_unit: ``rad/s``, ``rpm`` or ``erpm`` (electrical RPM, needs ``pole_pairs``).
@@ -72,6 +75,7 @@ class LogColumns:
     velocity_frame: str = "world"
     quaternion: tuple[str, str, str, str] | None = ("qx", "qy", "qz", "qw")
     euler_zxy: tuple[str, str, str] | None = None
+    euler_zyx: tuple[str, str, str] | None = None
     rates: tuple[str, str, str] = ("wx", "wy", "wz")
     motors: tuple[str, ...] = ("m1_erpm", "m2_erpm", "m3_erpm", "m4_erpm")
     motor_unit: str = "erpm"
@@ -86,8 +90,11 @@ class LogColumns:
             raise ValueError(
                 f"unknown velocity_frame {self.velocity_frame!r}; valid: {VELOCITY_FRAMES}"
             )
-        if (self.quaternion is None) == (self.euler_zxy is None):
-            raise ValueError("give exactly one attitude: quaternion columns or euler_zxy columns")
+        given = [a for a in (self.quaternion, self.euler_zxy, self.euler_zyx) if a is not None]
+        if len(given) != 1:
+            raise ValueError(
+                "give exactly one attitude: quaternion, euler_zxy or euler_zyx columns"
+            )
         if not self.motors:
             raise ValueError("motors must name at least one column")
         if self.motor_unit == "erpm" and self.pole_pairs < 1:
@@ -122,16 +129,20 @@ class LogColumns:
             elif isinstance(value, list):
                 value = tuple(value)
             values[key] = value
-        if "euler_zxy" in values and "quaternion" not in values:
+        if ("euler_zxy" in values or "euler_zyx" in values) and "quaternion" not in values:
             values["quaternion"] = None
         return replace(base, **values)
 
     def required(self) -> list[str]:
         """Every column the conversion reads."""
-        attitude = self.quaternion if self.quaternion is not None else self.euler_zxy
+        attitude = self.attitude()
         return [
             self.time, *self.position, *self.velocity, *attitude, *self.rates, *self.motors,
         ]  # fmt: skip
+
+    def attitude(self) -> tuple[str, ...]:
+        """The attitude columns: the quaternion's or the Euler angles'."""
+        return next(a for a in (self.quaternion, self.euler_zxy, self.euler_zyx) if a is not None)
 
     def motor_scale(self) -> float:
         """Factor from the logged unit to rad/s."""
@@ -270,6 +281,27 @@ def rotation_to_euler_zxy(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
     return phi, theta, psi
 
 
+def rotation_zyx(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """Body-to-world rotations of Z-Y-X Euler angles, R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    rows = [
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ]
+    return np.stack([np.stack(np.broadcast_arrays(*r), axis=-1) for r in rows], axis=-2)
+
+
+def rotation_to_euler_zyx(rot: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Z-Y-X Euler angles (roll, pitch, yaw) of rotations, inverse of :func:`rotation_zyx`."""
+    rot = np.asarray(rot, dtype=np.float64)
+    pitch = np.arcsin(np.clip(-rot[..., 2, 0], -1.0, 1.0))
+    roll = np.arctan2(rot[..., 2, 1], rot[..., 2, 2])
+    yaw = np.arctan2(rot[..., 1, 0], rot[..., 0, 0])
+    return roll, pitch, yaw
+
+
 def geodesic_angle(rot_a: np.ndarray, rot_b: np.ndarray) -> np.ndarray:
     """Angle [rad] of the rotation between two attitudes, arccos((tr(A^T B) - 1) / 2)."""
     trace = np.einsum("...ij,...ij->...", rot_a, rot_b)
@@ -333,7 +365,7 @@ def flight_to_trajectory(
     def stack(names: Sequence[str]) -> np.ndarray:
         return np.column_stack([np.asarray(table[c], dtype=np.float64) for c in names])
 
-    attitude_cols = columns.quaternion if columns.quaternion is not None else columns.euler_zxy
+    attitude_cols = columns.attitude()
     state_raw = stack([*columns.position, *columns.velocity, *attitude_cols, *columns.rates])
     nan = ~np.isfinite(state_raw)
     report.missing_state_values = int(nan.sum())
@@ -357,6 +389,9 @@ def flight_to_trajectory(
         quat = att - c
         quat /= np.linalg.norm(quat, axis=1, keepdims=True)
         rot = quaternion_to_rotation(quat)
+        phi, theta, psi = rotation_to_euler_zxy(rot)
+    elif columns.euler_zyx is not None:
+        rot = rotation_zyx(*att.T)
         phi, theta, psi = rotation_to_euler_zxy(rot)
     else:
         phi, theta, psi = att.T
@@ -437,6 +472,9 @@ def trajectory_to_table(
     if columns.quaternion is not None:
         quat = rotation_to_quaternion(rot) - np.asarray(quaternion_offset, dtype=np.float64)
         table.update({c: quat[:, i] for i, c in enumerate(columns.quaternion)})
+    elif columns.euler_zyx is not None:
+        angles = rotation_to_euler_zyx(rot)
+        table.update({c: angles[i] for i, c in enumerate(columns.euler_zyx)})
     else:
         table.update({c: x[:, 3 + i].copy() for i, c in enumerate(columns.euler_zxy)})
     table.update({c: x[:, 9 + i].copy() for i, c in enumerate(columns.rates)})

@@ -959,6 +959,7 @@ def select_model(
         xi, std, prob, dropped = _bootstrap(used, names, final_cfg, xi, n_models, seed,
                                             grown, ratio)  # fmt: skip
         report.warnings += dropped
+        report.warnings += _weak_terms_note(xi, std, prob, names, first.state_names)
     if not np.any(xi):
         raise ValueError(_empty_model_message(candidates, report.hold))
     report.final_terms = int(np.count_nonzero(xi))
@@ -976,6 +977,39 @@ def select_model(
     model = IdentifiedModel(names, xi, first.state_names, first.input_names, system, meta,
                             std, prob)  # fmt: skip
     return model, report
+
+
+WEAK_PROBABILITY = 0.6
+"""A kept term in fewer bootstrap fits than this, or spread over half its size, is named weak."""
+
+
+def _weak_terms_note(
+    xi: np.ndarray,
+    std: np.ndarray | None,
+    prob: np.ndarray | None,
+    names: Sequence[str],
+    states: Sequence[str],
+) -> list[str]:
+    """One note naming the kept terms the bootstrap leaves uncertain.
+
+    They are kept because the F-test on all data needs them; a trial on 2 s of a real
+    flight read ``-2.7 (+-2.7, P=0.50) alt`` without a word.
+    """
+    if std is None or prob is None:
+        return []
+    weak = [
+        f"{names[j]} in {states[i]}' (P={prob[i, j]:.2f}, +-{std[i, j]:.2g})"
+        for i, j in zip(*np.nonzero(xi), strict=True)
+        if prob[i, j] < WEAK_PROBABILITY or std[i, j] > 0.5 * abs(xi[i, j])
+    ]
+    if not weak:
+        return []
+    more = f" and {len(weak) - 6} more" if len(weak) > 6 else ""
+    return [
+        f"weak terms, kept because the fit on all data needs them but unsettled across the "
+        f"bootstrap fits: {', '.join(weak[:6])}{more}; more data (or more excitation) would "
+        "settle them"
+    ]
 
 
 def _empty_model_message(candidates: Sequence[Candidate], hold: float) -> str:

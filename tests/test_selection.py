@@ -1221,3 +1221,20 @@ def test_states_the_inputs_do_not_drive_are_refused_not_fitted_as_zero():
     library = library_from_spec("degree=2", ["a", "b"], ["c"])
     with pytest.raises(ValueError, match="no model with terms predicts the held-out data"):
         select_model(trajs, library, n_models=5)
+
+
+def test_weak_kept_terms_are_named_once():
+    from identification.selection import _weak_terms_note
+
+    xi = np.array([[1.0, -2.7, 0.0], [0.0, 0.0, 3.0]])
+    std = np.array([[0.01, 2.7, 0.0], [0.0, 0.0, 0.1]])
+    prob = np.array([[1.0, 0.5, 0.0], [0.0, 0.0, 0.55]])
+    notes = _weak_terms_note(xi, std, prob, ["1", "alt", "climb"], ["alt", "climb"])
+    assert len(notes) == 1
+    assert "alt in alt' (P=0.50, +-2.7)" in notes[0] and "climb in climb' (P=0.55" in notes[0]
+    assert "1 in alt'" not in notes[0]
+    assert _weak_terms_note(xi, std, np.ones_like(prob), ["1", "alt", "climb"], ["a", "c"]) == [
+        "weak terms, kept because the fit on all data needs them but unsettled across the "
+        "bootstrap fits: alt in a' (P=1.00, +-2.7); more data (or more excitation) would "
+        "settle them"
+    ]
