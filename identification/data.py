@@ -595,6 +595,16 @@ def resolve_names(
         raise ValueError(
             f"no states among the columns {cols}: name them with --states (states= in Python)"
         )
+    if not inp:  # a system without inputs: only when its states are named and nothing is left
+        left = [c for c in cols if c not in {*st, time} and not _ignored(c)]
+        if states is None or left:
+            raise ValueError(
+                f"no inputs among the columns {cols} (inputs are u1, u2, ... unless --inputs "
+                "names them)"
+                + (f"; the columns {left} are neither states nor inputs" if left else "")
+                + ": name the inputs with --inputs, or, for a system without inputs, name "
+                "every state with --states"
+            )
     unusable = [c for c in (*st, *inp) if not re.fullmatch(r"[A-Za-z_]\w*", c)]
     if unusable:
         raise ValueError(

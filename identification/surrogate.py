@@ -86,6 +86,10 @@ def surrogate_rhs(model: IdentifiedModel, cls: Any, compiled: bool = True) -> An
     return rhs
 
 
+GAIN_MISMATCH = 0.1
+"""Relative difference of the model's and the vehicle's response to an input at hover above
+which :func:`check_vehicle` warns."""
+
 HOVER_MISMATCH = 1.0
 """Largest acceleration [m/s^2 or rad/s^2] the model may predict at rest under the env
 vehicle's hover input before :func:`check_vehicle` warns."""
@@ -103,16 +107,36 @@ def check_vehicle(model: IdentifiedModel, vehicle: Any) -> str | None:
     """
     hover = np.zeros(len(model.input_names))
     hover[0] = float(vehicle.params.hover_thrust)
-    accel = np.asarray(model.rhs(np.zeros((1, len(model.state_names))), hover[None, :]))[0]
+    rest = np.zeros((1, len(model.state_names)))
+    accel = np.asarray(model.rhs(rest, hover[None, :]))[0]
     worst = int(np.argmax(np.abs(accel)))
-    if not abs(accel[worst]) > HOVER_MISMATCH:
-        return None
-    return (
-        f"the model does not hover at this env's vehicle: at rest under its hover thrust "
-        f"{hover[0]:.3g} N it predicts {model.state_names[worst]}' = {accel[worst]:.3g}; set the "
-        "env's vehicle to the model's (params={'mass': ...} or vehicle=..., --param/--vehicle "
-        "on the command line): its action limits and trim are the env's"
+    fix = (
+        "set the env's vehicle to the model's (params={'mass': ...} or vehicle=..., "
+        "--param/--vehicle on the command line): its action limits and trim are the env's"
     )
+    if abs(accel[worst]) > HOVER_MISMATCH:
+        return (
+            f"the model does not hover at this env's vehicle: at rest under its hover thrust "
+            f"{hover[0]:.3g} N it predicts {model.state_names[worst]}' = {accel[worst]:.3g}; " + fix
+        )
+    # the response to each input at hover: an inertia the user forgot to set (a trial's
+    # exact model parted from "the truth" at 0.02 s without a word)
+    step = 1e-3 * max(hover[0], 1.0)
+    for j, name in enumerate(model.input_names):
+        pushed = hover.copy()
+        pushed[j] += step
+        ours = (np.asarray(model.rhs(rest, pushed[None, :]))[0] - accel) / step
+        base = np.asarray(vehicle.rhs(rest[0], hover), dtype=np.float64)
+        theirs = (np.asarray(vehicle.rhs(rest[0], pushed), dtype=np.float64) - base) / step
+        gap = np.linalg.norm(ours - theirs) / max(np.linalg.norm(theirs), 1e-12)
+        if gap > GAIN_MISMATCH:
+            k = int(np.argmax(np.abs(theirs)))
+            return (
+                f"the model's response to {name} at hover differs from this env's vehicle by "
+                f"{gap:.0%} ({model.state_names[k]}' per unit {name}: {ours[k]:.4g} in the "
+                f"model, {theirs[k]:.4g} in the vehicle); " + fix
+            )
+    return None
 
 
 def _warn_vehicle(model: IdentifiedModel, env: Any) -> None:

@@ -270,10 +270,10 @@ def _matching_vehicle(state_names: tuple[str, ...], input_names: tuple[str, ...]
     """The registered vehicle with a library preset whose variables are exactly these."""
     from identification.libraries import PRESETS
 
-    for name, vehicle in VEHICLES.items():
-        if name in PRESETS and (vehicle.state_names, vehicle.input_names) == (
-            tuple(state_names),
-            tuple(input_names),
+    for name, vehicle in VEHICLES.items():  # in any column order (read in the preset's)
+        if name in PRESETS and (set(vehicle.state_names), set(vehicle.input_names)) == (
+            set(state_names),
+            set(input_names),
         ):
             return name
     return None
@@ -363,8 +363,9 @@ def identify(
                     "variables; --library or --angles choose another)"
                 )
                 declared = list(PRESET_ANGLES.get(preset, ()))
-                trajs, cleaning = load_data(*read, angles=declared, measured=first.measured,
-                                            time_unit=unit)  # fmt: skip
+                as_preset = (data, split(columns), preset, None, None, time.strip())
+                trajs, cleaning = load_data(*as_preset, angles=declared,
+                                            measured=first.measured, time_unit=unit)  # fmt: skip
                 first = trajs[0]
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")
@@ -617,6 +618,8 @@ def compare(
     Both fly the env's vehicle (``--vehicle``, ``--param``; the paper vehicle by default):
     set it to the vehicle the model was identified on.
     """
+    import numpy as np
+
     from agents.policies import make_policy
     from identification.experiments.compare import compare_envs, write_comparison
     from identification.model import load_model
@@ -640,6 +643,14 @@ def compare(
     typer.echo(
         f"parted by > {tolerance:g}: " + ("never" if parted is None else f"at t = {parted:.2f} s")
     )
+    flown = np.flatnonzero(~np.isnan(comp.surrogate).all(axis=1))
+    last = int(flown[-1]) if flown.size else 0
+    if last + 1 < len(comp.truth):  # the RMSE is over the steps both flew (a trial read 0.47 m)
+        typer.echo(
+            f"note: the surrogate's episode ended at t = {comp.t[last]:.2f} s (terminated: the "
+            f"state left the env's bounds), the truth's ran to {comp.t[-1]:.2f} s; the RMSE "
+            "is over the steps both flew"
+        )
     typer.echo(f"wrote {out}/abs_error.png, states.csv, summary.json")
 
 

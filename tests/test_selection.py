@@ -215,7 +215,12 @@ def test_a_system_without_inputs_is_identified_exactly(tmp_path):
                                   header=["t", "a", "b", "c"]))  # fmt: skip
         paths.append(str(path))
     out = tmp_path / "m.json"
-    result = CliRunner().invoke(app, ["identify", *paths, "--out", str(out)])
+    # inputs not named u1, u2, ...: refused, not fitted as states (a trial's trap)
+    bare = CliRunner().invoke(app, ["identify", *paths, "--out", str(out)])
+    assert bare.exit_code == 2 and "name every state with --states" in bare.output
+    partial = CliRunner().invoke(app, ["identify", *paths, "--states", "a,b", "--out", str(out)])
+    assert partial.exit_code == 2 and "['c'] are neither states nor inputs" in partial.output
+    result = CliRunner().invoke(app, ["identify", *paths, "--states", "a,b,c", "--out", str(out)])
     assert result.exit_code == 0, result.output
     model = load_model(out)
     truth = {(0, "a"): -10, (0, "b"): 10, (1, "a"): 28, (1, "b"): -1, (1, "a c"): -1,

@@ -1,3 +1,4 @@
+import dataclasses
 import sys
 import warnings
 
@@ -193,6 +194,10 @@ def test_a_surrogate_of_another_vehicle_warns_on_the_paper_vehicle_and_flies_on_
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         make_surrogate(model, "PlanarQuad-v0", compiled=False, params=OTHER_PLANAR)
+    # the right mass but another inertia: it hovers, yet its roll responds 1.5 times too much
+    forgot = dataclasses.replace(OTHER_PLANAR, Ixx=1.5 * OTHER_PLANAR.Ixx)
+    with pytest.warns(RuntimeWarning, match=r"response to u2 at hover differs .* by 50%"):
+        make_surrogate(model, "PlanarQuad-v0", compiled=False, params=forgot)
     changes = {"mass": "0.5", "Ixx": "3e-3", "arm_length": "0.15", "rotor_force_max": "4.905"}
     env = gym.make("PlanarQuad-v0", params=changes)
     assert env.unwrapped.params == OTHER_PLANAR
@@ -204,3 +209,17 @@ def test_a_surrogate_of_another_vehicle_warns_on_the_paper_vehicle_and_flies_on_
         cli.main()
     out, err = capsys.readouterr()
     assert code.value.code == 0 and "parted by > 0.001: never" in out and "warning" not in err
+
+
+def test_the_learning_curve_counts_the_steps_taken():
+    """PPO takes whole rollouts (1024 steps for 100 asked): the last row said 100, after rows
+    up to 1020, and mbrl's sample-efficiency ratio was 10 times off (a new-user trial)."""
+    import tempfile
+
+    from agents.train import train
+
+    with tempfile.TemporaryDirectory() as out:
+        result = train("PlanarQuad-v0", "ppo", 100, out, eval_every=512, eval_episodes=1,
+                       progress=False)  # fmt: skip
+    steps = [row[0] for row in result["curve"]]
+    assert steps == sorted(set(steps)) and steps[-1] == 1024
