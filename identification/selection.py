@@ -966,6 +966,10 @@ def select_model(
     if note:  # the checks' model is not returned: neither its notes nor statistics apply
         report.warnings = [*report.warnings[:validated], note]
         std = prob = None
+    else:  # a growth note describes its support: drop it where later checks changed that
+        moved = [i for i, cols in grown.items() if set(np.flatnonzero(xi[i])) != set(cols)]
+        stale = tuple(f"{first.state_names[i]}': the best support of" for i in moved)
+        report.warnings = [w for w in report.warnings if not w.startswith(stale)]
     if not np.any(xi):
         raise ValueError(_empty_model_message(candidates, report.hold))
     report.final_terms = int(np.count_nonzero(xi))

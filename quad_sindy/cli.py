@@ -145,6 +145,13 @@ def simulate(
     typer.echo(f"wrote {len(rows)} rows to {out}")
 
 
+FLIGHTS_IGNORE = {
+    "rotor_time_constant", "thrust_coefficient", "drag_linear_xy", "drag_linear_z",
+    "drag_quadratic_xy", "drag_quadratic_z",
+}  # fmt: skip
+"""Vehicle parameters of effects that ``flights`` does not fly (it is the rigid body)."""
+
+
 @app.command()
 def flights(
     out: Annotated[Path, typer.Option(help="folder for the flights (flight_K.csv)")],
@@ -193,6 +200,12 @@ def flights(
         changes = _vehicle_options(None, param).get("params")
         if changes:
             params = with_changes(params, changes)
+            unused = sorted(set(changes) & FLIGHTS_IGNORE)
+            if unused:  # accepted before and the flights were the same byte for byte
+                _fail(
+                    f"flights fly the rigid body and do not use {', '.join(unused)} (linear "
+                    "drag: --drag; rotor lag and the other effects: the envs' effects= option)"
+                )
         check_can_hover(params)
         default = 3 if system == "planar" else 4
         spec = FlightSpec(flights=count or default, steps=steps, dt=dt,

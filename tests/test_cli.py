@@ -253,3 +253,9 @@ def test_flights_of_another_vehicle_identify_to_the_exact_model(monkeypatch, cap
     assert code in (0, None) and model.n_terms == 7
     row = model.coefficients[model.state_names.index("z_dot")]
     assert abs(row[model.feature_names.index("cos(phi) u1")] * 1.3 - 1) < 1e-6
+    # parameters of effects the flights do not fly are refused (accepted before, and the
+    # flights were the same byte for byte)
+    code, _, err = run_cli(monkeypatch, capsys, "flights", "--param", "rotor_time_constant=0.03",
+                           "--out", str(tmp_path / "g"))  # fmt: skip
+    assert code == 2 and "do not use rotor_time_constant" in err
+    assert not (tmp_path / "g").exists()

@@ -262,7 +262,8 @@ def quad6dof_flights(
         worst = float(np.max(np.abs(states[:, 3:5])))
         if not worst < MAX_FLIGHT_TILT:
             raise ValueError(
-                f"flight {len(trajs)} of this vehicle tilted to {worst:.3g} rad: the PD lost it "
+                f"flight {len(trajs)} of this vehicle tumbled (roll or pitch past "
+                f"{MAX_FLIGHT_TILT} rad, {worst:.3g} at worst): the PD lost it "
                 f"(saturated rotors); lower the tilt (now {spec.tilt}) or give the vehicle more "
                 "control authority (rotor_force_max; arm_length for roll and pitch, gamma for yaw)"
             )
