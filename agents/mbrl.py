@@ -338,10 +338,16 @@ def run_experiment(
     runs_dir = out / "runs"
     settings = {**dataclasses.asdict(config), "seeds": seed_list}
     config_path = out / "config.json"
-    if config_path.exists() and json.loads(config_path.read_text()) != json.loads(
-        json.dumps(settings)
-    ):
-        raise ValueError(f"{out} holds an experiment with another configuration; use a new --out")
+    if config_path.exists():
+        # seeds are jobs of their own: a rerun may add or leave out seeds; the rest must match
+        # as values (params "4e-3" and "0.004" are one vehicle)
+        saved = canonical(json.loads(config_path.read_text()))
+        now = canonical(json.loads(json.dumps(settings)))
+        differ = sorted(k for k in {*saved, *now} - {"seeds"} if saved.get(k) != now.get(k))
+        if differ:
+            named = "; ".join(f"{k}: {saved.get(k)!r} there, {now.get(k)!r} here" for k in differ)
+            raise ValueError(f"{out} holds an experiment with another configuration ({named}); "
+                             "use a new --out")  # fmt: skip
     write_json(config_path, settings)
     runs: dict[str, dict[int, dict[str, Any]]] = {m: {} for m in METHODS}
     todo = []
@@ -372,6 +378,20 @@ def run_experiment(
     write_json(out / "mbrl.json", results)
     plot_curves(results, out / "mbrl.png")
     return results
+
+
+def canonical(value: Any) -> Any:
+    """JSON values with numeric strings as numbers (``"4e-3"`` and ``0.004`` compare equal)."""
+    if isinstance(value, dict):
+        return {k: canonical(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [canonical(v) for v in value]
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
 
 
 def plot_curves(results: dict[str, Any], path: Path) -> None:

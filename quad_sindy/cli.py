@@ -719,6 +719,7 @@ def evaluate_cmd(
     param: ParamOption = None,
 ) -> None:
     """Mean return of a trained agent on a task (ground truth or a surrogate)."""
+    from agents.mbrl import canonical
     from agents.policies import SB3Policy
     from agents.tasks import task_kwargs
     from agents.train import evaluate, load_agent
@@ -727,11 +728,41 @@ def evaluate_cmd(
         _fail(f"--episodes must be positive, got {episodes}")
     _check_model_option(env, model)
     loaded = load_agent(agent, algo.value if algo else None)
-    kwargs = task_kwargs(
-        task, **({"model": str(model)} if model else {}), **_vehicle_options(vehicle, param)
-    )
-    mean, std = evaluate(SB3Policy(loaded), env, episodes, **kwargs)
+    options = _vehicle_options(vehicle, param)
+    trained = _run_record(agent)
+    if trained:
+        notes = []
+        if trained.get("task") != task:
+            notes.append(f"task {trained.get('task')} (here {task})")
+        before = {k: v for k, v in trained.get("options", {}).items() if k in ("vehicle", "params")}
+        if canonical(before) != canonical(options):
+            notes.append(
+                f"vehicle options {before or 'the default'} (here {options or 'the default'})"
+            )
+        if notes:
+            typer.echo(f"note: the agent was trained on {trained.get('env')} with "
+                       f"{' and '.join(notes)} ({agent.with_name('run.json')})")  # fmt: skip
+    kwargs = task_kwargs(task, **({"model": str(model)} if model else {}), **options)
+    try:
+        mean, std = evaluate(SB3Policy(loaded), env, episodes, **kwargs)
+    except ValueError as exc:
+        if "observation shape" not in str(exc):
+            _fail(str(exc))
+        where = f" (it was trained on {trained['env']})" if trained else ""
+        _fail(f"this agent does not fit {env}{where}: {str(exc).removeprefix('Error: ')}")
     typer.echo(f"return {mean:.1f} +- {std:.1f} over {episodes} episodes")
+
+
+def _run_record(agent: Path) -> dict | None:
+    """The run record written beside a trained agent (None for agents trained elsewhere)."""
+    import json
+
+    path = agent.with_name("run.json")
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return record if isinstance(record, dict) else None
 
 
 class EnsembleMode(str, Enum):
@@ -808,6 +839,17 @@ def mbrl(
         f"fewer real steps to 95 % of model-free: {_fmt_interval(eff, 'x')} "
         f"({summary['reached']} of {summary['reached'] + summary['missed']} seeds reached it)"
     )
+    if eff.get("mean") is not None and eff["mean"] < 1:
+        typer.echo("note: a ratio under 1 means the SINDy loop needed MORE real steps")
+    free = res["runs"]["model_free"]
+    late = [s["seed"] for s in summary["seeds"] if s["model_free_steps"] is not None
+            and s["model_free_steps"] >= free[s["seed"]]["curve"][-1]["real_steps"]]  # fmt: skip
+    if late:  # its target is its last point: the baseline may still be learning
+        typer.echo(
+            f"note: the model-free baseline reached its 95 % target only at its last "
+            f"evaluation on seed(s) {late}: it may not have converged, which flatters the "
+            "ratio; give it more --baseline-steps"
+        )
     typer.echo(f"wrote {out}/mbrl.json and {out}/mbrl.png")
 
 

@@ -62,8 +62,13 @@ def test_experiment_runs_saves_each_job_and_resumes(tmp_path):
     again = run_experiment(TINY, tmp_path, seeds=2, echo=messages.append)
     assert messages[0].startswith("0 jobs to run, 4 loaded")
     assert again["summary"] == json.loads(json.dumps(first["summary"]))
-    with pytest.raises(ValueError, match="another configuration"):
+    with pytest.raises(ValueError, match=r"another configuration \(.*iterations: \d+ there, 3"):
         run_experiment(MBRLConfig(iterations=3), tmp_path, seeds=2)
+    # one seed fewer is the same experiment: its jobs are loaded (a trial could not extend
+    # or narrow an experiment)
+    messages.clear()
+    run_experiment(TINY, tmp_path, seeds=1, echo=messages.append)
+    assert messages[0].startswith("0 jobs to run, 2 loaded")
 
 
 @pytest.mark.skipif(not ray_available(), reason="Ray (the optional extra) is not installed")
@@ -150,3 +155,10 @@ def test_a_sindy_job_is_reproducible_from_its_seed(tmp_path):
     config = dataclasses.replace(TINY, task="figure8", model_steps_per_iteration=2048)
     first = run_job("sindy", config, 3, str(tmp_path))
     assert run_job("sindy", config, 3, str(tmp_path)) == first
+
+
+def test_configurations_compare_as_values():
+    from agents.mbrl import canonical
+
+    assert canonical({"params": {"Ixx": "4e-3"}}) == canonical({"params": {"Ixx": 0.004}})
+    assert canonical({"task": "hover"}) != canonical({"task": "figure8"})
