@@ -45,13 +45,37 @@ def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: b
     if not isinstance(model, IdentifiedModel):
         model = load_model(model)
     vehicle = cls.vehicle
-    if (model.state_names, model.input_names) != (vehicle.state_names, vehicle.input_names):
-        raise ValueError(
-            f"model variables {model.state_names} / {model.input_names} do not match {base_id}'s "
-            f"{vehicle.state_names} / {vehicle.input_names}: a surrogate steps its vehicle's "
-            "variables, so identify from a log with those names (--columns renames a CSV's)"
-        )
+    ours = (model.state_names, model.input_names)
+    theirs = (vehicle.state_names, vehicle.input_names)
+    if ours != theirs and (set(ours[0]), set(ours[1])) == (set(theirs[0]), set(theirs[1])):
+        model = _in_order(model, *theirs)  # the same variables, logged in another order
+    elif ours != theirs:
+        raise ValueError(_mismatch(model, base_id, theirs))
     return model, cls
+
+
+def _in_order(model: IdentifiedModel, states: tuple, inputs: tuple) -> IdentifiedModel:
+    """The model with its states (rows) and inputs in the given order (features are names)."""
+    rows = [model.state_names.index(n) for n in states]
+    pick = lambda a: None if a is None else a[rows]  # noqa: E731
+    return IdentifiedModel(model.feature_names, model.coefficients[rows], states, inputs,
+                           model.system, model.meta, pick(model.coefficient_std),
+                           pick(model.inclusion_probability))  # fmt: skip
+
+
+def _mismatch(model: IdentifiedModel, base_id: str, theirs: tuple) -> str:
+    """Why a model cannot step ``base_id``'s vehicle, with what would fix it."""
+    from quad_envs.vehicles import VEHICLES
+
+    head = (f"model variables {model.state_names} / {model.input_names} do not match "
+            f"{base_id}'s {theirs[0]} / {theirs[1]}")  # fmt: skip
+    if not model.input_names:
+        return head + ": the model has no inputs, and a surrogate env steps with actions"
+    for name, vehicle in VEHICLES.items():
+        if {*vehicle.state_names, *vehicle.input_names} == {*model.state_names, *model.input_names}:
+            return head + f": it is a model of the {name} vehicle; use that vehicle's env"
+    return head + (": a surrogate steps its vehicle's variables, so identify from a log with "
+                   "those names (--columns renames a CSV's)")  # fmt: skip
 
 
 def surrogate_rhs(model: IdentifiedModel, cls: Any, compiled: bool = True) -> Any:

@@ -634,9 +634,16 @@ def compare(
     import numpy as np
 
     from agents.policies import make_policy
+    from identification import SURROGATE_IDS
     from identification.experiments.compare import compare_envs, write_comparison
     from identification.model import load_model
 
+    if env in (*SURROGATE_IDS, "CrazyflieSINDy-v0"):
+        _fail(f"--env is the ground truth to compare with (PlanarQuad-v0, ...), not {env}; "
+              "the model is --model")  # fmt: skip
+    if not tolerance > 0:
+        _fail(f"--tolerance must be positive, got {tolerance:g}")
+    _writable_folder(out)
     try:
         identified = load_model(model)
         options = _vehicle_options(vehicle, param)
@@ -811,6 +818,10 @@ def mbrl(
 
     if env in (*SURROGATE_IDS, "CrazyflieSINDy-v0"):
         _fail(f"--env is the ground truth the loop learns from (PlanarQuad-v0, ...), not {env}")
+    if disagreement < 0:
+        _fail(
+            f"--disagreement must be >= 0 (0: never end an imagined episode), got {disagreement:g}"
+        )
     if (workers > 1 or address) and not ray_available():
         _fail("parallel runs need Ray: pip install 'quad-sindy[ray]' (or --workers 1)")
     env_options: dict[str, object] = _vehicle_options(vehicle, param)

@@ -259,3 +259,22 @@ def test_flights_of_another_vehicle_identify_to_the_exact_model(monkeypatch, cap
                            "--out", str(tmp_path / "g"))  # fmt: skip
     assert code == 2 and "do not use rotor_time_constant" in err
     assert not (tmp_path / "g").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "fragments"),
+    [
+        (["--env", "PlanarQuadSINDy-v0"], ("--env is the ground truth", "the model is --model")),
+        (["--tolerance", "-1"], ("--tolerance must be positive",)),
+    ],
+)
+def test_compare_refuses_settings_a_trial_got_wrong_answers_from(
+    monkeypatch, capsys, tmp_path, args, fragments
+):
+    from identification.experiments.truth import model_from_truth
+
+    path = model_from_truth("planar").save(tmp_path / "m.json")
+    code, _, err = run_cli(monkeypatch, capsys, "compare", "--model", str(path), *args,
+                           "--out", str(tmp_path / "cmp"))  # fmt: skip
+    assert_one_line_error(code, err, *fragments)
+    assert not (tmp_path / "cmp").exists()

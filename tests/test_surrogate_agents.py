@@ -223,3 +223,27 @@ def test_the_learning_curve_counts_the_steps_taken():
                        progress=False)  # fmt: skip
     steps = [row[0] for row in result["curve"]]
     assert steps == sorted(set(steps)) and steps[-1] == 1024
+
+
+def test_a_model_in_another_variable_order_steps_and_mismatches_say_why():
+    from identification.experiments.truth import model_from_truth
+    from identification.surrogate import make_surrogate as make
+
+    model = model_from_truth("planar")
+    order = [2, 0, 1, 5, 3, 4]
+    shuffled = IdentifiedModel(model.feature_names, model.coefficients[order],
+                               tuple(model.state_names[i] for i in order),
+                               model.input_names[::-1], None, {})  # fmt: skip
+    a, b = make(model, compiled=False), make(shuffled, compiled=False)
+    a.reset(seed=0), b.reset(seed=0)
+    for _ in range(50):
+        action = a.action_space.sample()
+        oa, *_ = a.step(action)
+        ob, *_ = b.step(action)
+    np.testing.assert_allclose(oa, ob, rtol=0, atol=1e-12)
+    autonomous = IdentifiedModel(model.feature_names[:6], model.coefficients[:, :6],
+                                 model.state_names, (), None, {})  # fmt: skip
+    with pytest.raises(ValueError, match="the model has no inputs"):
+        make(autonomous, compiled=False)
+    with pytest.raises(ValueError, match="a model of the planar vehicle; use that vehicle's env"):
+        make(model, "Quad6DOF-v0", compiled=False)
