@@ -34,7 +34,7 @@ import numpy as np
 from agents.parallel import run_jobs
 from agents.policies import OrnsteinUhlenbeckPolicy, SB3Policy
 from agents.tasks import task_kwargs
-from agents.train import ALGOS, evaluate, make_algo, train
+from agents.train import ALGOS, canonical, evaluate, make_algo, train
 from identification.data import Trajectory
 from identification.fit import FitConfig, fit
 from identification.libraries import default_library
@@ -378,20 +378,6 @@ def run_experiment(
     write_json(out / "mbrl.json", results)
     plot_curves(results, out / "mbrl.png")
     return results
-
-
-def canonical(value: Any) -> Any:
-    """JSON values with numeric strings as numbers (``"4e-3"`` and ``0.004`` compare equal)."""
-    if isinstance(value, dict):
-        return {k: canonical(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [canonical(v) for v in value]
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return value
 
 
 def plot_curves(results: dict[str, Any], path: Path) -> None:

@@ -91,6 +91,52 @@ def load_agent(path: str | Path, algo: str | None = None) -> Any:
     return quiet_logger((PPO if found == "ppo" else SAC).load(path, device="cpu"))
 
 
+def _save(model: Any, path: Path) -> None:
+    """Saves an agent atomically, readable by others (a killed run leaves no half file)."""
+    partial = path.with_name(f".{path.stem}.partial.zip")
+    model.save(partial)
+    partial.chmod(0o644)
+    os.replace(partial, path)
+
+
+def _resume(out: Path, config: dict[str, Any], env: gym.Env) -> tuple[Any, list]:
+    """The agent and curve of an earlier run of ``config`` in ``out``, or (None, []).
+
+    An unfinished run resumes from its last checkpoint (SAC without its replay buffer); a
+    finished one is loaded, and trained on only when the step budget grew (its agent is not
+    trained again from scratch and overwritten).
+
+    Raises:
+        ValueError: ``out`` holds a run of another configuration.
+    """
+    record_path = out / RUN_RECORD
+    if not record_path.exists():
+        return None, []
+    try:
+        saved = json.loads(record_path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None, []
+    if not isinstance(saved, dict) or "seed" not in saved:
+        return None, []  # a record of an older version: train afresh
+    # the step budget may grow: a finished run trains on to the new budget
+    same = {k: canonical(saved.get(k)) == canonical(v) for k, v in config.items()}
+    differ = sorted(k for k, ok in same.items() if not ok and k != "steps")
+    if differ:
+        named = "; ".join(f"{k}: {saved.get(k)!r} there, {config[k]!r} here" for k in differ)
+        raise ValueError(f"{out} holds a training run of another configuration ({named}); "
+                         "use a new --out")  # fmt: skip
+    source = out / ("model.zip" if saved.get("done") else CHECKPOINT)
+    if not source.exists():
+        return None, []
+    model = load_agent(source, config["algo"])
+    model.set_env(env)
+    lines = (out / "learning_curve.csv").read_text().splitlines()[1:] \
+        if (out / "learning_curve.csv").exists() else []  # fmt: skip
+    rows = [[float(v) for v in line.split(",")] for line in lines if line.strip()]
+    curve = [(int(r[0]), r[1], r[2]) for r in rows if len(r) == 3 and r[0] <= model.num_timesteps]
+    return model, curve
+
+
 def make_env(env_id: str, **env_kwargs: Any) -> gym.Env:
     """``gym.make`` for a quadrotor env or surrogate, with a one-line error for any other id.
 
@@ -127,7 +173,25 @@ def evaluate(
 
 
 RUN_RECORD = "run.json"
-"""Written beside a trained agent: env id, algorithm, task, steps and env options."""
+"""Written beside a trained agent: its configuration (env id, algorithm, task, seed, steps,
+evaluation settings, env options), the steps taken and whether the run is done."""
+
+CHECKPOINT = "checkpoint.zip"
+"""The agent at the last evaluation of an unfinished run: a rerun resumes from it."""
+
+
+def canonical(value: Any) -> Any:
+    """JSON values with numeric strings as numbers (``"4e-3"`` and ``0.004`` compare equal)."""
+    if isinstance(value, dict):
+        return {k: canonical(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [canonical(v) for v in value]
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
 
 
 def train(
@@ -162,23 +226,32 @@ def train(
     kwargs = task_kwargs(task, **(env_kwargs or {}))
     env = make_env(env_id, **kwargs)  # before the output folder: a bad id leaves nothing
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    model = make_algo(algo, env, seed)
-    curve: list[tuple[int, float, float]] = []
+    config = {"env": env_id, "algo": algo, "task": task, "seed": seed, "steps": steps,
+              "eval_every": eval_every, "eval_episodes": eval_episodes,
+              "options": json.loads(json.dumps(env_kwargs or {}, default=str))}  # fmt: skip
+    model, curve = _resume(out, config, env)
+    if model is None:
+        out.mkdir(parents=True, exist_ok=True)
+        model, curve = make_algo(algo, env, seed), []
+        write_json(out / RUN_RECORD, {**config, "steps_taken": 0, "done": False})
+    header = ["steps", "return_mean", "return_std"]
 
     class Evaluate(BaseCallback):
         def _on_step(self) -> bool:
             if self.num_timesteps % eval_every == 0:
                 mean, std = evaluate(SB3Policy(self.model), env_id, eval_episodes, **kwargs)
                 curve.append((self.num_timesteps, mean, std))
-                write_csv(
-                    out / "learning_curve.csv",
-                    ["steps", "return_mean", "return_std"],
-                    np.array(curve),
-                )
+                write_csv(out / "learning_curve.csv", header, np.array(curve))
+                _save(self.model, out / CHECKPOINT)  # a killed run resumes from here
+                write_json(out / RUN_RECORD, {**config, "steps_taken": self.num_timesteps,
+                                              "done": False})  # fmt: skip
             return True
 
-    model.learn(total_timesteps=steps, callback=Evaluate(), progress_bar=progress)
+    started = int(model.num_timesteps)
+    remaining = steps - started
+    if remaining > 0:
+        model.learn(total_timesteps=remaining, callback=Evaluate(), progress_bar=progress,
+                    reset_num_timesteps=int(model.num_timesteps) == 0)  # fmt: skip
     mean, std = evaluate(SB3Policy(model), env_id, eval_episodes, **kwargs)
     # the steps taken, not asked for: PPO rounds up to whole rollouts (100 asked, 1024 taken:
     # a trial's sample-efficiency ratio was 10 times off); one row per step count
@@ -187,10 +260,10 @@ def train(
         curve[-1] = (done, mean, std)
     else:
         curve.append((done, mean, std))
-    write_csv(out / "learning_curve.csv", ["steps", "return_mean", "return_std"], np.array(curve))
-    model.save(out / "model.zip")
-    # what the agent was trained on, for `evaluate` to compare with (RUN_RECORD)
-    record = {"env": env_id, "algo": algo, "task": task, "steps": done,
-              "options": json.loads(json.dumps(env_kwargs or {}, default=str))}  # fmt: skip
-    write_json(out / RUN_RECORD, record)
-    return {"final_return": mean, "final_std": std, "curve": curve, "model": str(out / "model.zip")}
+    write_csv(out / "learning_curve.csv", header, np.array(curve))
+    _save(model, out / "model.zip")
+    # what the agent was trained on, for `evaluate` to compare with, and that it is done
+    write_json(out / RUN_RECORD, {**config, "steps_taken": done, "done": True})
+    (out / CHECKPOINT).unlink(missing_ok=True)
+    return {"final_return": mean, "final_std": std, "curve": curve,
+            "model": str(out / "model.zip"), "resumed_at": started}  # fmt: skip

@@ -706,6 +706,8 @@ def train_cmd(
     _writable_folder(out)
     kwargs = {**({"model": str(model)} if model else {}), **_vehicle_options(vehicle, param)}
     result = train(env, algo.value, steps, out, seed, eval_every, env_kwargs=kwargs, task=task)
+    if result["resumed_at"]:
+        typer.echo(f"resumed the run in {out} at {result['resumed_at']} steps")
     typer.echo(
         f"final return {result['final_return']:.1f} +- {result['final_std']:.1f}; "
         f"saved {result['model']}"
@@ -726,10 +728,9 @@ def evaluate_cmd(
     param: ParamOption = None,
 ) -> None:
     """Mean return of a trained agent on a task (ground truth or a surrogate)."""
-    from agents.mbrl import canonical
     from agents.policies import SB3Policy
     from agents.tasks import task_kwargs
-    from agents.train import evaluate, load_agent
+    from agents.train import canonical, evaluate, load_agent
 
     if episodes < 1:
         _fail(f"--episodes must be positive, got {episodes}")

@@ -158,7 +158,7 @@ def test_a_sindy_job_is_reproducible_from_its_seed(tmp_path):
 
 
 def test_configurations_compare_as_values():
-    from agents.mbrl import canonical
+    from agents.train import canonical
 
     assert canonical({"params": {"Ixx": "4e-3"}}) == canonical({"params": {"Ixx": 0.004}})
     assert canonical({"task": "hover"}) != canonical({"task": "figure8"})

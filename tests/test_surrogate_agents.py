@@ -247,3 +247,28 @@ def test_a_model_in_another_variable_order_steps_and_mismatches_say_why():
         make(autonomous, compiled=False)
     with pytest.raises(ValueError, match="a model of the planar vehicle; use that vehicle's env"):
         make(model, "Quad6DOF-v0", compiled=False)
+
+
+def test_training_resumes_from_its_checkpoint_and_never_starts_over(tmp_path):
+    """A killed `train` lost everything and a rerun overwrote a finished agent (a trial)."""
+    import json
+
+    from agents.train import CHECKPOINT, RUN_RECORD, train
+
+    out = tmp_path / "run"
+    options = {"eval_every": 512, "eval_episodes": 1, "progress": False}
+    first = train("PlanarQuad-v0", "ppo", 1024, out, **options)
+    assert json.loads((out / RUN_RECORD).read_text())["done"] is True
+    assert not (out / CHECKPOINT).exists()
+    again = train("PlanarQuad-v0", "ppo", 1024, out, **options)  # done: loaded, not retrained
+    assert again["curve"] == first["curve"]
+    # killed after its first rollout: the checkpoint and an unfinished record are left
+    (out / "model.zip").rename(out / CHECKPOINT)
+    record = json.loads((out / RUN_RECORD).read_text())
+    (out / RUN_RECORD).write_text(json.dumps({**record, "done": False}))
+    resumed = train("PlanarQuad-v0", "ppo", 2048, out, **options)
+    steps = [row[0] for row in resumed["curve"]]
+    assert steps[: len(first["curve"])] == [row[0] for row in first["curve"]]
+    assert steps == sorted(set(steps)) and steps[-1] == 2048
+    with pytest.raises(ValueError, match=r"another configuration \(seed: 0 there, 1 here\)"):
+        train("PlanarQuad-v0", "ppo", 2048, out, seed=1, **options)
