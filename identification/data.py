@@ -440,7 +440,7 @@ def clean(
         outliers[idx[1:-1][peak]] = True
     report.outlier_rows = int(outliers.sum())
     bad_x |= outliers
-    spikes = _input_spikes(t, u, np.flatnonzero(~dropped))
+    spikes = _input_spikes(u, np.flatnonzero(~dropped))
     report.input_spikes = int(spikes.sum())
     dropped |= spikes
     # runs of bad states longer than ``bridge`` are dropped like bad times
@@ -503,7 +503,7 @@ SPIKE_ROWS = 3
 """Longest run of rows an input spike may last (a glitch, re-sent for a row or two)."""
 
 
-def _input_spikes(t: np.ndarray, u: np.ndarray, rows: np.ndarray) -> np.ndarray:
+def _input_spikes(u: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """Rows (among ``rows``) where an input spikes far outside its range for a row or three.
 
     A spike lies outside the input's range widened by that range on both sides (0.5 and
@@ -512,7 +512,7 @@ def _input_spikes(t: np.ndarray, u: np.ndarray, rows: np.ndarray) -> np.ndarray:
     across the step by the step itself, and a pulse of a binary excitation signal stays
     inside its range.
     """
-    out = np.zeros(t.size, dtype=bool)
+    out = np.zeros(u.shape[0], dtype=bool)
     if rows.size < 5:
         return out
     us = u[rows]
@@ -665,7 +665,7 @@ def _read_table(
         raise FileNotFoundError(f"no such data file: {path}")
     wanted = [c for c in (time, *(states or ()), *(inputs or ())) if c]
     if path.suffix.lower() in (*PARQUET_SUFFIXES, ".npz"):
-        table = read_table(path, time=time, time_unit=time_unit)
+        table = read_table(path, time=time, time_unit=time_unit, required=wanted)
         names = list(table)
         if not names or not len(table[names[0]]):
             raise ValueError(f"{path} has no rows of numeric columns")
@@ -783,6 +783,7 @@ def read_table(
     columns: Sequence[str] | None = None,
     time: str | None = None,
     time_unit: float = 1.0,
+    required: Sequence[str] = (),
 ) -> dict[str, np.ndarray]:
     """Reads a parquet, CSV or NPZ file into float64 columns.
 
@@ -796,6 +797,7 @@ def read_table(
         time: The time column, converted to seconds from its earliest value by ``time_unit``
             when that is not 1 (seconds per unit: 1e-3 for milliseconds).
         time_unit: Seconds per unit of a numeric ``time`` column.
+        required: Columns that must be numeric where present (a text one raises, naming it).
 
     Returns:
         Column name -> 1-D float array.
@@ -831,7 +833,7 @@ def read_table(
             )
     except (OSError, pa.ArrowInvalid) as exc:  # unreadable, or not that format inside
         raise ValueError(f"{path}: cannot read the log ({exc})") from None
-    return _float_columns(table, path, list(columns or ()), time, time_unit)
+    return _float_columns(table, path, [*(columns or ()), *required], time, time_unit)
 
 
 def is_npz_archive(path: str | Path) -> bool:

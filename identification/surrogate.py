@@ -146,11 +146,11 @@ def check_vehicle(model: IdentifiedModel, vehicle: Any) -> str | None:
     # the response to each input at hover: an inertia the user forgot to set (a trial's
     # exact model parted from "the truth" at 0.02 s without a word)
     step = 1e-3 * max(hover[0], 1.0)
+    base = np.asarray(vehicle.rhs(rest[0], hover), dtype=np.float64)
     for j, name in enumerate(model.input_names):
         pushed = hover.copy()
         pushed[j] += step
         ours = (np.asarray(model.rhs(rest, pushed[None, :]))[0] - accel) / step
-        base = np.asarray(vehicle.rhs(rest[0], hover), dtype=np.float64)
         theirs = (np.asarray(vehicle.rhs(rest[0], pushed), dtype=np.float64) - base) / step
         gap = np.linalg.norm(ours - theirs) / max(np.linalg.norm(theirs), 1e-12)
         if gap > GAIN_MISMATCH:

@@ -518,22 +518,15 @@ def _degree_notes(trajs: list[Any], library: list[str]) -> list[str]:
 
     from identification.features import parse_term
 
-    first = trajs[0]
-    names = [*first.state_names, *first.input_names]
+    names = [*trajs[0].state_names, *trajs[0].input_names]
     inside = {f.var for term in library for f in parse_term(term) if f.kind in TRIG_KINDS}
-    notes = []
-    for j, name in enumerate(names):
-        if name in inside:
-            column = j if j < len(first.state_names) else j - len(first.state_names)
-            field = "x" if j < len(first.state_names) else "u"
-            peak = max(float(np.nanmax(np.abs(getattr(t, field)[:, column]))) for t in trajs)
-            if peak > 2 * math.pi:
-                notes.append(
-                    f"note: {name} reaches {peak:.3g} inside sin/cos: angles are in radians "
-                    "(a log in degrees gives wrong models; an angle that turns several times "
-                    "is fine)"
-                )
-    return notes
+    peaks = np.max([np.nanmax(np.abs(np.column_stack([t.x, t.u])), axis=0) for t in trajs], axis=0)
+    return [
+        f"note: {name} reaches {peak:.3g} inside sin/cos: angles are in radians (a log in "
+        "degrees gives wrong models; an angle that turns several times is fine)"
+        for name, peak in zip(names, peaks, strict=True)
+        if name in inside and peak > 2 * math.pi
+    ]
 
 
 TRIG_KINDS = ("sin", "cos", "tan", "sec")
