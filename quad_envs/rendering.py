@@ -42,6 +42,19 @@ def _polyline_pixels(points: FloatArray, step: float = 0.7) -> FloatArray:
     return np.vstack([starts + deltas * offsets[:, None], points[-1:]])
 
 
+def _warn_if_headless(backend: str) -> None:
+    """Warns that ``human`` frames go nowhere when matplotlib has no interactive backend."""
+    from matplotlib.backends import BackendFilter, backend_registry
+
+    if backend.lower() in backend_registry.list_builtin(BackendFilter.NON_INTERACTIVE):
+        import gymnasium as gym
+
+        gym.logger.warn(
+            f"render_mode='human' shows nothing: matplotlib's backend {backend!r} is not "
+            "interactive (no display?); use render_mode='rgb_array' to get the frames"
+        )
+
+
 class QuadRenderer:
     """Draws frames of one vehicle (``rgb_array`` returns them, ``human`` shows them).
 
@@ -121,6 +134,7 @@ class QuadRenderer:
         import matplotlib.pyplot as plt
 
         if self._window is None:
+            _warn_if_headless(plt.get_backend())
             fig, ax = plt.subplots(figsize=(frame.shape[1] / 80, frame.shape[0] / 80), dpi=80)
             ax.set_axis_off()
             self._window = (fig, ax, ax.imshow(frame))
