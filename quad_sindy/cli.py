@@ -268,7 +268,10 @@ def _shared_reference() -> Path | None:
     return None
 
 
-ANGLE_NAMES = ("phi", "theta", "psi", "roll", "pitch", "yaw", "heading", "angle", "attitude")
+ANGLE_NAMES = (
+    "phi", "theta", "psi", "alpha", "beta", "gamma", "roll", "pitch", "yaw", "heading", "bank",
+    "angle", "ang", "attitude", "azimuth", "elevation", "bearing", "course",
+)  # fmt: skip
 """Name parts that suggest an angle (a hint to declare it, nothing more)."""
 
 
@@ -406,6 +409,13 @@ def identify(
                     f"angle{'s' if len(looks) > 1 else ''} but no angle is declared: "
                     "angles enter only through sin and cos once declared (--angles, or angles= "
                     "in --library)"
+                )
+            unlike = [n for n in declared if not _looks_like_angle(n)]
+            if unlike and preset is None:
+                typer.echo(
+                    f"note: {', '.join(unlike)} declared an angle without an angle's name: "
+                    "a declared angle enters only through sin and cos, never as itself or "
+                    "in powers (leave it out of --angles if it is not an angle)"
                 )
             held = [n for n in first.input_names
                     if _looks_like_angle(n) and n not in first.measured]  # fmt: skip

@@ -142,6 +142,11 @@ def test_cli_identify_any_names_and_show(tmp_path, other_clean):
     bare = CliRunner().invoke(app, ["identify", *paths, "--out", str(tmp_path / "bare.json"),
                                     "--inputs", "thrust,moment", "--lambda", "0.001"])  # fmt: skip
     assert "note: roll looks like angle but no angle is declared" in bare.output
+    assert "without an angle's name" not in result.output  # roll is one
+    odd = CliRunner().invoke(app, ["identify", *paths, "--out", str(tmp_path / "odd.json"),
+                                   "--inputs", "thrust,moment", "--angles", "roll,a",
+                                   "--lambda", "0.001"])  # fmt: skip
+    assert "note: a declared an angle without an angle's name" in odd.output, odd.output
     shown = CliRunner().invoke(app, ["show", str(out)])
     assert shown.exit_code == 0 and "P=1.00" in shown.output and "selected:" in shown.output
     latex = CliRunner().invoke(app, ["show", str(out), "--latex"])
