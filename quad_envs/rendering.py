@@ -5,7 +5,10 @@ view y-z and a top view x-y) and where its rotors are. Frames are drawn straight
 uint8 image (a few hundred microseconds each), so ``rgb_array`` keeps up with the env's
 ``render_fps`` (one frame per control step: 100 fps at dt = 0.01 s) and ``RecordVideo``
 writes real-time videos. ``human`` mode shows the same frames in a matplotlib window and
-waits so that it plays no faster than ``render_fps``.
+waits so that it plays no faster than ``render_fps``; it needs a display (an interactive
+matplotlib backend): without one it shows nothing, and ``render()`` returns None in ``human``
+mode as Gymnasium's API says. It does not warn: Gymnasium's ``check_env`` renders every
+mode, and a warning there fails a checker run under warnings-as-errors on headless machines.
 """
 
 from __future__ import annotations
@@ -40,19 +43,6 @@ def _polyline_pixels(points: FloatArray, step: float = 0.7) -> FloatArray:
     deltas = np.repeat(seg / counts[:, None], counts, axis=0)
     offsets = np.concatenate([np.arange(c) for c in counts]) if counts.size else np.zeros(0)
     return np.vstack([starts + deltas * offsets[:, None], points[-1:]])
-
-
-def _warn_if_headless(backend: str) -> None:
-    """Warns that ``human`` frames go nowhere when matplotlib has no interactive backend."""
-    from matplotlib.backends import BackendFilter, backend_registry
-
-    if backend.lower() in backend_registry.list_builtin(BackendFilter.NON_INTERACTIVE):
-        import gymnasium as gym
-
-        gym.logger.warn(
-            f"render_mode='human' shows nothing: matplotlib's backend {backend!r} is not "
-            "interactive (no display?); use render_mode='rgb_array' to get the frames"
-        )
 
 
 class QuadRenderer:
@@ -134,7 +124,6 @@ class QuadRenderer:
         import matplotlib.pyplot as plt
 
         if self._window is None:
-            _warn_if_headless(plt.get_backend())
             fig, ax = plt.subplots(figsize=(frame.shape[1] / 80, frame.shape[0] / 80), dpi=80)
             ax.set_axis_off()
             self._window = (fig, ax, ax.imshow(frame))

@@ -222,20 +222,6 @@ def test_make_without_import_and_render():
     subprocess.run([sys.executable, "-c", code], check=True, env={"MPLBACKEND": "Agg", "PATH": ""})
 
 
-def test_human_mode_without_a_display_says_it_shows_nothing():
-    code = (
-        "import warnings, gymnasium as gym\n"
-        "env = gym.make('quad_envs:PlanarQuad-v0', render_mode='human')\n"
-        "with warnings.catch_warnings(record=True) as caught:\n"
-        "    warnings.simplefilter('always')\n"
-        "    env.reset(seed=0)\n"
-        "    env.step(env.action_space.sample())\n"
-        "said = [str(w.message) for w in caught if 'shows nothing' in str(w.message)]\n"
-        "assert len(said) == 1 and 'agg' in said[0].lower(), said\n"
-    )
-    subprocess.run([sys.executable, "-c", code], check=True, env={"MPLBACKEND": "Agg", "PATH": ""})
-
-
 @pytest.mark.parametrize("env_id", IDS)
 def test_record_video_writes_a_real_time_video(env_id, tmp_path):
     env = gym.make(env_id, render_mode="rgb_array")

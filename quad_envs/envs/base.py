@@ -457,7 +457,8 @@ class QuadrotorEnv(_EnvCore, gym.Env):
     """A quadrotor tracking a reference; subclasses fix the vehicle (see their docstrings).
 
     Args:
-        render_mode: ``rgb_array`` or ``human``.
+        render_mode: ``rgb_array`` (frames) or ``human`` (a matplotlib window: needs a display;
+            without one nothing is shown).
         rhs: Vector field replacing the ground-truth physics (surrogate models).
         **options: The fields of :class:`EnvConfig` (``trajectory``, ``dt``, ``substeps``,
             ``duration``, ``normalize_actions``, ``init_state_scale``, ``obs_noise_std``,
