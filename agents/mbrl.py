@@ -39,7 +39,7 @@ from identification.data import Trajectory
 from identification.fit import FitConfig, fit
 from identification.libraries import default_library
 from identification.model import IdentifiedModel
-from identification.rollouts import collect_rollouts
+from identification.rollouts import RECORDS, collect_rollouts
 from identification.selection import select_model
 from identification.surrogate import ENSEMBLE_MODES, make_ensemble_surrogate
 from quad_envs.fileio import write_json
@@ -69,6 +69,10 @@ class MBRLConfig:
         env_options: Options of the ground truth (vehicle, params, effects). The surrogate
             gets the task options and the vehicle's (its action limits and trim: the model
             is its only physics), never the effects.
+        data: What the real rollouts record for identification: ``truth`` (the true state
+            and the applied input, as a simulator gives them) or ``measured`` (the state the
+            sensors report, with the truth's noise, bias and delay, and the commanded input,
+            as a real flight log holds them).
     """
 
     env_id: str = "PlanarQuad-v0"
@@ -85,8 +89,11 @@ class MBRLConfig:
     ensemble_mode: str = "median"
     disagreement: float | None = 0.1
     env_options: dict[str, Any] = field(default_factory=dict)
+    data: str = "truth"
 
     def __post_init__(self) -> None:
+        if self.data not in RECORDS:
+            raise ValueError(f"unknown data {self.data!r}; valid choices: {RECORDS}")
         if self.algo not in ALGOS:
             raise ValueError(f"unknown algorithm {self.algo!r}; valid choices: {ALGOS}")
         if self.ensemble_mode not in ENSEMBLE_MODES:
@@ -118,7 +125,7 @@ def _collect(config: MBRLConfig, policy: Any, steps: int, seed: int) -> list[Tra
     while total < steps:
         new = collect_rollouts(
             config.env_id, policy, 1, seed + episode, max_steps=max(steps - total, 10),
-            env_kwargs=config.truth_kwargs,
+            env_kwargs=config.truth_kwargs, record=config.data,
         )  # fmt: skip
         episode += 1
         for traj in new:
@@ -341,7 +348,9 @@ def run_experiment(
     if config_path.exists():
         # seeds are jobs of their own: a rerun may add or leave out seeds; the rest must match
         # as values (params "4e-3" and "0.004" are one vehicle)
-        saved = canonical(json.loads(config_path.read_text()))
+        # a setting added since that run was saved held its default value there
+        defaults = dataclasses.asdict(MBRLConfig())
+        saved = canonical({**defaults, **json.loads(config_path.read_text())})
         now = canonical(json.loads(json.dumps(settings)))
         differ = sorted(k for k in {*saved, *now} - {"seeds"} if saved.get(k) != now.get(k))
         if differ:

@@ -1,7 +1,11 @@
 """Data from environments: rollouts of any policy in any registered env, recorded as trajectories.
 
-The recorded input is the one the vehicle *applied* (``info["action"]``, after saturation);
-what the policy commanded is kept in ``Trajectory.meta["commanded"]``.
+By default (``record="truth"``) a rollout records the true state (``info["state"]``) and the
+input the vehicle *applied* (``info["action"]``, after saturation); what the policy commanded
+is kept in ``Trajectory.meta["commanded"]``. That is what a simulator can give and a real
+vehicle cannot. ``record="measured"`` records what a flight log holds instead: the state as
+the sensors report it (the observation's state entries, with the env's noise, bias and delay;
+angles unwrapped) and the commanded input.
 """
 
 from __future__ import annotations
@@ -19,6 +23,9 @@ from quad_envs.trajectories import RandomWaypoints
 Policy = Callable[[np.ndarray, dict[str, Any]], np.ndarray]
 """A policy maps (observation, info) to an action of the env's action space."""
 
+RECORDS = ("truth", "measured")
+"""What a rollout records: the true state and applied input, or the sensors' and commands."""
+
 
 def collect_rollouts(
     env_id: str,
@@ -29,8 +36,9 @@ def collect_rollouts(
     max_steps: int | None = None,
     env_kwargs: dict[str, Any] | None = None,
     reset_options: Callable[[int, np.random.Generator], dict[str, Any]] | None = None,
+    record: str = "truth",
 ) -> list[Trajectory]:
-    """Runs a policy in a registered env and records states and *applied* inputs.
+    """Runs a policy in a registered env and records states and inputs.
 
     Args:
         env_id: Any registered id (``PlanarQuad-v0``, a surrogate, ...).
@@ -41,15 +49,23 @@ def collect_rollouts(
         max_steps: Cap on steps per episode (the env's time limit otherwise).
         env_kwargs: Passed to ``gym.make``.
         reset_options: (episode, rng) -> options for that episode's ``reset``.
+        record: ``truth`` (the true state and the applied input) or ``measured`` (the
+            observed state and the commanded input: what a real log holds).
 
     Returns:
         One trajectory per episode (at least 3 samples each).
     """
+    if record not in RECORDS:
+        raise ValueError(f"record must be one of {RECORDS}, got {record!r}")
     try:
         env = gym.make(env_id, **(env_kwargs or {}))
     except gym.error.Error as exc:
         raise ValueError(f"unknown or unusable env id {env_id!r}: {exc}") from None
     base = env.unwrapped
+    vehicle = base.vehicle
+    n = len(vehicle.state_names)
+    angles = [vehicle.state_names.index(a) for a in vehicle.angle_names]
+    measured = record == "measured"
     rng = np.random.default_rng(seed)
     space = env.action_space
     half = 0.5 * (space.high - space.low)
@@ -65,21 +81,25 @@ def collect_rollouts(
                 action = np.clip(action + action_noise * half * rng.standard_normal(half.shape),
                                  space.low, space.high)  # fmt: skip
             ts.append(info["time"])
-            xs.append(info["state"])
+            xs.append(np.array(obs[:n], dtype=np.float64) if measured else info["state"])
             refs.append(info["reference"])
             obs, _, terminated, truncated, info = env.step(action.astype(space.dtype))
-            us.append(info["action"])
-            commanded.append(info.get("commanded", info["action"]))
+            applied = info["action"]
+            commanded.append(info.get("commanded", applied))
+            us.append(commanded[-1] if measured else applied)
             steps += 1
             if terminated or truncated or (max_steps is not None and steps >= max_steps):
                 break
         if len(us) >= 3:
-            vehicle = base.vehicle
-            meta = {"env": env_id, "seed": seed + ep, "commanded": np.array(commanded)}
+            meta = {"env": env_id, "seed": seed + ep, "commanded": np.array(commanded),
+                    "record": record}  # fmt: skip
+            x = np.array(xs)
+            if measured:  # observations wrap the heading into [-pi, pi)
+                x[:, angles] = np.unwrap(x[:, angles], axis=0)
             trajs.append(
                 Trajectory(
                     np.array(ts),
-                    np.array(xs),
+                    x,
                     np.array(us),
                     vehicle.state_names,
                     vehicle.input_names,
@@ -98,6 +118,7 @@ def excitation_rollouts(
     steps: int = 1000,
     noise: float = 0.15,
     env_kwargs: dict[str, Any] | None = None,
+    record: str = "truth",
 ) -> list[Trajectory]:
     """The vehicle's own controller tracking random waypoints plus exploration noise.
 
@@ -111,9 +132,10 @@ def excitation_rollouts(
         steps: Steps per flight.
         noise: Action noise as a fraction of the action box half-width.
         env_kwargs: Passed to ``gym.make`` (``params=`` flies another vehicle).
+        record: ``truth`` or ``measured`` (see :func:`collect_rollouts`).
 
     Returns:
-        The recorded trajectories (applied inputs).
+        The recorded trajectories.
     """
     env_kwargs = {"duration": steps * 0.01 + 1.0, **(env_kwargs or {})}
     probe = gym.make(env_id, **env_kwargs)
@@ -141,4 +163,5 @@ def excitation_rollouts(
         max_steps=steps,
         env_kwargs=env_kwargs,
         reset_options=options,
+        record=record,
     )

@@ -375,6 +375,24 @@ def get_preset(name: str, kind: str) -> PlanarQuadParams | Quad6DOFParams:
     return PRESETS[name][kind]
 
 
+def check_can_hover(params: Any) -> None:
+    """Raises ValueError when the rotors' largest thrust does not exceed the weight.
+
+    No controller can fly such a vehicle: every flight, episode or log of it is a fall.
+    """
+    if not hasattr(params, "thrust_max"):
+        return
+    margin = np.asarray(params.thrust_max - params.hover_thrust, dtype=float)
+    if not np.all(margin > 0):
+        k = int(np.argmin(margin))  # the worst member of batched parameters
+        top = float(np.ravel(np.broadcast_to(params.thrust_max, margin.shape))[k])
+        weight = float(np.ravel(np.broadcast_to(params.hover_thrust, margin.shape))[k])
+        raise ValueError(
+            f"the vehicle cannot hover: its largest thrust {top:.4g} N does not exceed its "
+            f"weight m g = {weight:.4g} N (raise rotor_force_max)"
+        )
+
+
 def with_changes(params: Any, changes: Mapping[str, str]) -> Any:
     """``params`` with some fields set from text (``mass=0.5`` on the command line).
 

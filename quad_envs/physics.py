@@ -96,10 +96,18 @@ class Effects:
     rotor_max_fraction: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "wind_mean", tuple(float(w) for w in self.wind_mean))
-        object.__setattr__(
-            self, "rotor_max_fraction", tuple(float(f) for f in self.rotor_max_fraction)
-        )
+        for name, example in (
+            ("wind_mean", "[1.0, 0.0]"),
+            ("rotor_max_fraction", "[1, 1, 1, 0.9]"),
+        ):
+            value = getattr(self, name)
+            try:
+                object.__setattr__(self, name, tuple(float(v) for v in value))
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"effects.{name} takes one number per axis or rotor, e.g. {example}; "
+                    f"got {value!r}"
+                ) from None
         for name in ("gust_std", "obs_bias_std"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:

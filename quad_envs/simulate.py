@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from quad_envs.integrators import rk4_step
+from quad_envs.params import check_can_hover
 from quad_envs.trajectories import Reference, make_trajectory
 from quad_envs.types import FloatArray
 from quad_envs.vehicles import Controller, Vehicle, get_vehicle
@@ -98,15 +99,6 @@ def simulate_closed_loop(
         applied[k] = vehicle.saturate(commanded[k])
         x = rk4_step(vehicle.rhs, x, applied[k], dt, substeps)
     return ClosedLoopRun(t, states, commanded, applied, refs, vehicle)
-
-
-def check_can_hover(params: Any) -> None:
-    """Raises ValueError when the rotors' largest thrust does not exceed the weight."""
-    if hasattr(params, "thrust_max") and not params.thrust_max > params.hover_thrust:
-        raise ValueError(
-            f"the vehicle cannot hover: its largest thrust {params.thrust_max:.4g} N does not "
-            f"exceed its weight m g = {params.hover_thrust:.4g} N (raise rotor_force_max)"
-        )
 
 
 def simulate_case(

@@ -184,8 +184,7 @@ def flights(
         planar_flights,
         quad6dof_flights,
     )
-    from quad_envs.params import get_preset, with_changes
-    from quad_envs.simulate import check_can_hover
+    from quad_envs.params import check_can_hover, get_preset, with_changes
 
     if system not in ("planar", "quad6dof"):
         _fail(f"--system is planar or quad6dof, not {system!r}")
@@ -783,6 +782,13 @@ class EnsembleMode(str, Enum):
     sample = "sample"
 
 
+class DataRecord(str, Enum):
+    """What the loop's real rollouts record for identification."""
+
+    truth = "truth"
+    measured = "measured"
+
+
 @app.command()
 def mbrl(
     out: Annotated[Path, typer.Option(help="output folder (a rerun resumes)")] = Path("out/mbrl"),
@@ -812,6 +818,13 @@ def mbrl(
     ] = None,
     vehicle: VehicleOption = None,
     param: ParamOption = None,
+    data: Annotated[
+        DataRecord,
+        typer.Option(
+            help="identify from the true state and applied input (truth) or from the "
+            "sensors' state and the commands (measured: a real log)"
+        ),
+    ] = DataRecord.truth,
 ) -> None:
     """SINDy model-based RL against model-free RL over seeds (mean and 95 % intervals)."""
     import gymnasium as gym
@@ -843,6 +856,7 @@ def mbrl(
         model_steps_per_iteration=model_steps, baseline_steps=baseline_steps,
         ensemble=ensemble, ensemble_mode=ensemble_mode.value,
         disagreement=disagreement if disagreement > 0 else None, env_options=env_options,
+        data=data.value,
     )  # fmt: skip
     _writable_folder(out)
     res = run_experiment(config, out, seeds, workers, address, echo=typer.echo)

@@ -327,6 +327,11 @@ def test_bad_effects_and_modes_raise_one_line_errors():
         gym.make("Quad6DOF-v0", action_mode="throttle")
     with pytest.raises(ValueError, match="rotor_max_fraction needs 2"):
         gym.make("PlanarQuad-v0", effects={"rotor_max_fraction": (1, 1, 1, 1)})
+    with pytest.raises(ValueError, match="one number per axis or rotor"):  # was a TypeError
+        gym.make("PlanarQuad-v0", effects={"rotor_max_fraction": 0.9})
+    # 0.5 kg on the paper's rotors (3.53 N at most): every episode was a silent fall
+    with pytest.raises(ValueError, match=r"cannot hover: its largest thrust 3.532 N .* 4.905 N"):
+        gym.make("PlanarQuad-v0", params={"mass": "0.5"})
     with pytest.raises(ValueError, match="rhs="):
         gym.make("PlanarQuad-v0", rhs=lambda x, u: x * 0, effects=["drag"])
     assert Effects.from_spec(None, 2, 2) == Effects()
@@ -423,3 +428,35 @@ def test_compiled_surrogate_env_follows_the_truth():
         *_, info = truth.step(action)
         *_, sinfo = surrogate.step(action)
     np.testing.assert_allclose(sinfo["state"], info["state"], atol=1e-9)
+
+
+def test_measured_rollouts_record_what_a_log_holds():
+    """``record="measured"``: the sensors' state (bias, delay) and the commanded input; the
+    default records the true state and the applied (saturated) input."""
+    from identification.rollouts import collect_rollouts
+
+    kw = {"effects": {"obs_bias_std": 0.01, "obs_delay_steps": 1, "rotor_max_fraction": (1, 0.6)}}
+    hover = PAPER_PLANAR.hover_thrust
+
+    def policy(obs, info):  # saturates the weaker rotor: applied differs from commanded
+        return np.array([1.3 * hover, 0.002])
+
+    truth = collect_rollouts("PlanarQuad-v0", policy, 1, seed=4, max_steps=40, env_kwargs=kw)[0]
+    log = collect_rollouts("PlanarQuad-v0", policy, 1, seed=4, max_steps=40, env_kwargs=kw,
+                           record="measured")[0]  # fmt: skip
+    assert truth.meta["record"] == "truth" and log.meta["record"] == "measured"
+    bias = log.x[1] - truth.x[0]  # one step late, offset by the episode's bias
+    assert np.abs(bias).max() > 1e-4
+    np.testing.assert_allclose(log.x[1:], truth.x[:-1] + bias, atol=1e-12)
+    np.testing.assert_allclose(log.u, truth.meta["commanded"])
+    assert np.abs(truth.u - truth.meta["commanded"]).max() > 1e-3  # the rotor limit bit
+    # the observation wraps the heading; the log unwraps it (a turning vehicle stays smooth)
+    start = np.zeros(12)
+    start[2], start[5], start[11] = 1.0, 3.1, 2.0  # psi near pi, turning at 2 rad/s
+    turn = collect_rollouts(
+        "Quad6DOF-v0", lambda o, i: np.array([PAPER_6DOF.hover_thrust, 0, 0, 0]), 1,
+        max_steps=20, reset_options=lambda ep, rng: {"state": start}, record="measured",
+    )[0]  # fmt: skip
+    assert turn.x[-1, 5] > np.pi and np.abs(np.diff(turn.x[:, 5])).max() < 0.1
+    with pytest.raises(ValueError, match="record must be one of"):
+        collect_rollouts("PlanarQuad-v0", policy, record="sensors")

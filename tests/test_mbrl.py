@@ -162,3 +162,21 @@ def test_configurations_compare_as_values():
 
     assert canonical({"params": {"Ixx": "4e-3"}}) == canonical({"params": {"Ixx": 0.004}})
     assert canonical({"task": "hover"}) != canonical({"task": "figure8"})
+
+
+def test_the_loop_can_identify_from_what_a_real_log_holds(tmp_path):
+    """``data="measured"``: the loop's real rollouts record the sensors' state and the
+    commands (with the truth's sensor bias and delay), and the loop runs on them."""
+    from agents.mbrl import _collect
+    from agents.policies import OrnsteinUhlenbeckPolicy
+
+    config = dataclasses.replace(TINY, data="measured", env_options={"effects": ["sensor"]})
+    policy = OrnsteinUhlenbeckPolicy(gym.make("PlanarQuad-v0", **config.truth_kwargs), 0)
+    logged = _collect(config, policy, 100, 0)
+    assert {t.meta["record"] for t in logged} == {"measured"}
+    np.testing.assert_array_equal(logged[0].x[0], logged[0].x[1])  # the delay repeats it
+    assert not np.allclose(logged[0].x[1], logged[0].x[2])
+    result = run_job("sindy", config, 0, str(tmp_path))
+    assert len(result["curve"]) == TINY.iterations
+    with pytest.raises(ValueError, match="unknown data 'sensors'"):
+        MBRLConfig(data="sensors")

@@ -25,7 +25,7 @@ from gymnasium.vector.utils import batch_space
 
 from quad_envs import physics
 from quad_envs.integrators import Rhs, rk4_step
-from quad_envs.params import PRESETS, get_preset, with_changes
+from quad_envs.params import PRESETS, check_can_hover, get_preset, with_changes
 from quad_envs.tasks import FlightVolume
 from quad_envs.trajectories import RandomWaypoints, Reference, make_trajectory
 from quad_envs.types import FloatArray
@@ -159,6 +159,7 @@ class _EnvCore:
         if params is None or isinstance(params, Mapping):
             preset = get_preset(config.vehicle, self.vehicle.name)
             params = with_changes(preset, params) if params else preset
+        check_can_hover(params)
         self.vehicle = self.vehicle.with_params(params)
         self.params = params
         veh = self.vehicle
