@@ -8,7 +8,6 @@ step with the (saturated) command held over the step.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
