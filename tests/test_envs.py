@@ -304,3 +304,15 @@ def test_a_vehicle_that_cannot_exist_is_refused_by_name(env_id, field):
     assert ok.mass.shape == (2,)
     with pytest.raises(ValueError, match="mass"):
         base.replace(mass=np.array([0.1, -0.2]))
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_vector_reset_info_is_the_single_envs_member_by_member(env_id):
+    """A policy reading ``info`` (the PD policies) can act on a vector env's first step."""
+    venv = gym.make_vec(env_id, 3)
+    _, infos = venv.reset(seed=5)
+    for i in range(3):
+        _, info = gym.make(env_id).reset(seed=5 + i)
+        assert set(info) <= set(infos)
+        for key, value in info.items():
+            np.testing.assert_allclose(infos[key][i], value, err_msg=key)

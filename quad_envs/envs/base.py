@@ -681,12 +681,20 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self._needs_reset[:] = False
         self._steps_bound = 0
         self._was_reset = True
-        obs = self._observe_all(self._states, self._references(), self._rng_state, self._bias)
+        refs = self._references()
+        obs = self._observe_all(self._states, refs, self._rng_state, self._bias)
         if self._delay:
             # The observations still to return, oldest first: each step appends the new one
             # and returns (hands over) the oldest, so no observation is copied.
             self._pending = deque(obs.copy() for _ in range(self._delay))
-        return obs, {}
+        # as the single env's reset info, member by member (a policy reading info acts at once)
+        states = self._states.copy()
+        zero_u = np.zeros((self.num_envs, self._m))
+        info = {"state": states[:, : self._n], "reference": refs, "action": zero_u,
+                "commanded": zero_u.copy(), "time": self._steps * self.dt}  # fmt: skip
+        if self._rotor_state:
+            info["rotor_thrusts"] = states[:, self._n :]
+        return obs, info
 
     def _reset_members(self, rows: np.ndarray, state: Any = None, spec: Any = None) -> None:
         """Starts new episodes of the members in rows: each draws from its own generator.
