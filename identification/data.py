@@ -78,10 +78,14 @@ class Trajectory:
     measured: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        self.t = np.asarray(self.t, dtype=np.float64)
-        self.x = np.atleast_2d(np.asarray(self.x, dtype=np.float64))
-        self.u = np.atleast_2d(np.asarray(self.u, dtype=np.float64))
         self.state_names, self.input_names = tuple(self.state_names), tuple(self.input_names)
+        # copies: a caller who changes their array afterwards must not change the data
+        self.t = np.array(_by_name(self.t, None, "t"), dtype=np.float64)
+        self.x = np.atleast_2d(np.array(_by_name(self.x, self.state_names, "x"), dtype=np.float64))
+        self.u = np.atleast_2d(np.array(_by_name(self.u, self.input_names, "u"), dtype=np.float64))
+        for name, arr in (("x", self.x), ("u", self.u)):
+            if arr.ndim != 2:
+                raise ValueError(f"{name} must be 2-D (samples x variables), got shape {arr.shape}")
         if self.missing is not None:
             self.missing = np.asarray(self.missing, dtype=bool)
             if self.missing.shape != self.t.shape:
@@ -188,6 +192,26 @@ def stage_inputs(
             value += weight[:, None] * u[r + j - 1][:, cols]
         um[np.ix_(inner, cols)] = value
     return u0, um, u1
+
+
+def _by_name(values: Any, names: tuple[str, ...] | None, what: str) -> Any:
+    """A table's columns in the order of ``names`` (a DataFrame's labels are not ignored).
+
+    Plain arrays pass through. A table with labelled columns (``.columns``) is taken by name:
+    the same names in another order are reordered; other labels are refused.
+    """
+    columns = getattr(values, "columns", None)
+    if columns is None or names is None:
+        return values
+    labels = [str(c) for c in columns]
+    if labels == list(names) or all(isinstance(c, int | np.integer) for c in columns):
+        return values
+    if sorted(labels) == sorted(names):
+        return values[list(names)]
+    raise ValueError(
+        f"{what}'s columns {labels} are not the names given {list(names)}: pass the columns by "
+        f"name (df[{list(names)}]) or name them as the data's"
+    )
 
 
 def validate(traj: Trajectory) -> None:
@@ -618,7 +642,7 @@ def resolve_names(
 def read_csv(
     path: str | Path,
     columns: Sequence[str] | None = None,
-    system: str | None = "planar",
+    system: str | None = None,
     states: Sequence[str] | None = None,
     inputs: Sequence[str] | None = None,
     time: str = "t",
@@ -957,9 +981,9 @@ def load_npz(path: str | Path) -> list[Trajectory]:
 
 
 def load_data(
-    paths: Sequence[str | Path],
+    paths: str | Path | Sequence[str | Path],
     columns: Sequence[str] | None = None,
-    system: str | None = "planar",
+    system: str | None = None,
     states: Sequence[str] | None = None,
     inputs: Sequence[str] | None = None,
     time: str = "t",
@@ -981,6 +1005,8 @@ def load_data(
             or steps :data:`STEP_RATIO` times faster or slower than another (a file in
             milliseconds among files in seconds).
     """
+    if isinstance(paths, str | Path):
+        paths = [paths]  # one file (a string is not a list of one-letter paths)
     trajs: list[Trajectory] = []
     report = CleanReport()
     first: tuple[str, tuple[str, ...]] | None = None

@@ -737,9 +737,17 @@ def fit(
         ValueError: The data cannot identify the library (see :func:`check_identifiable`).
     """
     config = config or FitConfig()
+    if isinstance(trajs, Trajectory):
+        trajs = [trajs]
     _check_dataset(trajs)
-    names = [term_name(parse_term(n)) for n in feature_names]
     first = trajs[0]
+    if isinstance(feature_names, str):  # a preset or a spec ("planar", "degree=2;angles=phi")
+        from identification.libraries import library_from_spec
+
+        feature_names = library_from_spec(feature_names, first.state_names, first.input_names)
+    if feature_names is None or len(feature_names) == 0:
+        raise ValueError("the library is empty: give feature names, a preset or a spec")
+    names = [term_name(parse_term(n)) for n in feature_names]
     for n in feature_names:
         parse_term(n, [*first.state_names, *first.input_names])
     base = Gram.stack(grams(trajs, names, "forward", 1))

@@ -76,13 +76,31 @@ class IdentifiedModel:
             self._rhs = compile_rhs(
                 self.feature_names, self.coefficients, self.state_names, self.input_names
             )
+        self._check_shapes(x, u)
         return self._rhs(x, u)
 
     def theta(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """The library evaluated at (x, u), shape (..., n_features)."""
         if self._theta is None:
             self._theta = compile_features(self.feature_names, self.state_names, self.input_names)
+        self._check_shapes(x, u)
         return self._theta(x, u)
+
+    def _check_shapes(self, x: Any, u: Any) -> None:
+        """Raises ValueError unless x is (..., n) and u is (..., m) with the same leading axes."""
+        xs, us = np.shape(x), np.shape(u)
+        n, m = len(self.state_names), len(self.input_names)
+        if not xs or xs[-1] != n or (us[-1:] != (m,) and not (m == 0 and not us)):
+            raise ValueError(
+                f"the model takes states of shape (..., {n}) and inputs of shape (..., {m}) "
+                f"({', '.join(self.state_names)} / {', '.join(self.input_names) or 'no inputs'}), "
+                f"got {xs} and {us}"
+            )
+        if us and xs[:-1] != us[:-1]:
+            raise ValueError(
+                f"states {xs} and inputs {us} must have the same leading axes (one input row "
+                "per state row)"
+            )
 
     def torch_rhs(self) -> Callable[[Any, Any], Any]:
         """A batched torch version of :meth:`rhs`: differentiable, on any device and dtype.
@@ -124,30 +142,39 @@ class IdentifiedModel:
         Returns:
             The equations, one string per state.
         """
+        if (
+            isinstance(precision, bool)
+            or not isinstance(precision, int | np.integer)
+            or not (1 <= precision <= 17)
+        ):
+            raise ValueError(f"precision must be an integer from 1 to 17, got {precision!r}")
+        number = _latex_number if latex else (lambda v, digits: f"{v:.{digits}g}")
         stats = uncertainty and self.coefficient_std is not None
         lines = []
         for i, state in enumerate(self.state_names):
-            parts = []
+            rhs = ""
             for j, name in enumerate(self.feature_names):
                 c = self.coefficients[i, j]
                 if c == 0:
                     continue
                 term = parse_term(name)
                 text = term_latex(term) if latex else term_name(term)
-                coef = f"{c:.{precision}g}"
+                coef = number(abs(c), precision)
                 if stats:
-                    std = self.coefficient_std[i, j]  # type: ignore[index]
+                    std = number(self.coefficient_std[i, j], 2)  # type: ignore[index]
                     prob = (
                         self.inclusion_probability[i, j]
                         if self.inclusion_probability is not None
                         else float("nan")
                     )
                     if latex:
-                        coef = f"({coef} \\pm {std:.2g})_{{P={prob:.2f}}}"
+                        coef = f"({coef} \\pm {std})_{{P={prob:.2f}}}"
                     else:
-                        coef = f"{coef} (+-{std:.2g}, P={prob:.2f})"
-                parts.append(coef if text == "1" else f"{coef} {text}")
-            rhs = " + ".join(parts).replace("+ -", "- ") if parts else "0"
+                        coef = f"{coef} (+-{std}, P={prob:.2f})"
+                part = coef if text == "1" else f"{coef} {text}"
+                sign = "-" if c < 0 else "+"
+                rhs = f"{rhs} {sign} {part}" if rhs else (f"-{part}" if c < 0 else part)
+            rhs = rhs or "0"
             if latex:
                 lhs = "\\dot{" + term_latex(parse_term(state)) + "}"
                 lines.append(f"{lhs} = {rhs}")
@@ -157,13 +184,13 @@ class IdentifiedModel:
 
     # -- simulation -------------------------------------------------------------------
     def simulate(
-        self, x0: np.ndarray, inputs: np.ndarray, dt: float | np.ndarray, substeps: int = 1
+        self, x0: np.ndarray, inputs: np.ndarray | None, dt: float | np.ndarray, substeps: int = 1
     ) -> np.ndarray:
         """Open loop by RK4, input row k over step k. Returns states, shape (len(inputs)+1, n).
 
         Args:
             x0: Initial state.
-            inputs: One row per step.
+            inputs: One row per step (None for a model without inputs: one dt per step then).
             dt: The step, or one step per input row (a log's own steps, jitter and all:
                 ``np.diff(t, append=2 * t[-1] - t[-2])``).
             substeps: RK4 substeps per step.
@@ -172,7 +199,18 @@ class IdentifiedModel:
         signals (``meta.measured_inputs``) are interpolated within each step as in the fit
         (the last step holds them).
         """
+        if isinstance(substeps, bool) or not isinstance(substeps, int | np.integer) or substeps < 1:
+            raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
         x0 = np.asarray(x0, dtype=np.float64)
+        if inputs is None:  # a model without inputs: the steps give the length
+            if self.input_names:
+                raise ValueError(f"inputs needed: one row of {list(self.input_names)} per step")
+            if np.ndim(dt) != 1:
+                raise ValueError(
+                    "a model without inputs needs one dt per step (an array) to know how many "
+                    "steps to take, or inputs=np.zeros((steps, 0))"
+                )
+            inputs = np.zeros((len(dt), 0))
         inputs = np.asarray(inputs, dtype=np.float64)
         if inputs.ndim == 1 and len(self.input_names) == 1:
             inputs = inputs[:, None]  # one input: a plain sequence of its values
@@ -300,6 +338,15 @@ def load_model(path: str | Path) -> IdentifiedModel:
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: malformed JSON ({exc})") from None
     return IdentifiedModel.from_dict(data, source=str(path))
+
+
+def _latex_number(value: float, digits: int) -> str:
+    r"""``1.1e-14`` as ``1.1 \times 10^{-14}``; plain digits where no exponent is needed."""
+    text = f"{value:.{digits}g}"
+    if "e" not in text:
+        return text
+    mantissa, exponent = text.split("e")
+    return f"{mantissa} \\times 10^{{{int(exponent)}}}"
 
 
 def _optional_array(value: Any) -> np.ndarray | None:

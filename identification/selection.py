@@ -81,6 +81,7 @@ from identification.fit import (
     solve,
     solve_lambdas,
 )
+from identification.libraries import library_from_spec
 from identification.model import IdentifiedModel
 from quad_envs.fileio import jsonable
 
@@ -834,17 +835,31 @@ def select_model(
     """
     from tqdm import tqdm
 
+    if isinstance(trajs, Trajectory):
+        trajs = [trajs]
     if not trajs:
         raise ValueError("no trajectories to fit")
     first = trajs[0]
     if any((t.state_names, t.input_names) != (first.state_names, first.input_names) for t in trajs):
         raise ValueError("all trajectories must have the same state and input names")
+    _check_settings(folds, lambdas, windows, horizon, n_models)
+    if isinstance(library, str):  # a preset or a spec ("planar", "degree=2;angles=phi")
+        library = library_from_spec(library, first.state_names, first.input_names)
+    if library is None or len(library) == 0:
+        raise ValueError("the library is empty: give feature names, a preset or a spec")
     variables = [*first.state_names, *first.input_names]
     names = [term_name(parse_term(n, variables)) for n in library]
     base = config or FitConfig(optimizer="stepwise")
     TALLY.counts.clear()
     check_identifiable(Gram.stack(grams(trajs, names, "forward", 1)), names, trajs)
+    asked = sorted({int(w) for w in windows})
     units, windows, horizon = validation_units(trajs, folds, windows, horizon)
+    if not set(asked) & set(windows):
+        raise ValueError(
+            f"every window asked ({asked}) is too long for this data: windows up to a quarter "
+            f"of the typical segment ({typical_length(trajs)} rows) fit; window "
+            f"{max(windows)} does"
+        )
     k = min(folds, len(units))
     fold_of = np.arange(len(units)) % k
     scale = score_scale(units, horizon)
@@ -923,6 +938,7 @@ def select_model(
         "residuals' long-run variance dropped"
     )
     report = SelectionReport(candidates, chosen, k, horizon, rule)
+    report.warnings += data_warnings(trajs, names)
     still = lambda x, u: np.zeros_like(x)  # noqa: E731
     report.hold = float(np.mean([
         prediction_score(still, [u for u, fo in zip(units, fold_of, strict=True) if fo == f],
@@ -987,6 +1003,56 @@ def select_model(
     model = IdentifiedModel(names, xi, first.state_names, first.input_names, system, meta,
                             std, prob)  # fmt: skip
     return model, report
+
+
+TRIG_KINDS = ("sin", "cos", "tan", "sec")
+
+
+def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()) -> list[str]:
+    """Signs that the data are not in the units the fit assumes: seconds and radians.
+
+    A step of a second or more is a log in milliseconds read as seconds (rates 1000 times too
+    small); a variable inside sin/cos/tan/sec past 2 pi is an angle in degrees, or one that
+    turns several times (fine).
+    """
+    notes = []
+    dt = float(np.median([t.dt for t in trajs]))
+    if dt >= 1.0:
+        notes.append(
+            f"the time step is {dt:g} s: a log in milliseconds gives rates 1000 times too small "
+            "(say its unit: --time-unit ms, or time_unit=1e-3 in load_data)"
+        )
+    names = [*trajs[0].state_names, *trajs[0].input_names]
+    inside = {f.var for term in feature_names for f in parse_term(term) if f.kind in TRIG_KINDS}
+    peaks = np.max([np.abs(np.column_stack([t.x, t.u])).max(axis=0) for t in trajs], axis=0)
+    notes += [
+        f"{name} reaches {peak:.3g} inside sin/cos: angles are in radians (a log in degrees "
+        "gives wrong models; an angle that turns several times is fine)"
+        for name, peak in zip(names, peaks, strict=True)
+        if name in inside and peak > 2 * np.pi
+    ]
+    return notes
+
+
+def _check_settings(
+    folds: int, lambdas: Sequence[float], windows: Sequence[int], horizon: int, n_models: int
+) -> None:
+    """Raises ValueError naming a selection setting that cannot work."""
+
+    def whole(value: Any) -> bool:
+        return not isinstance(value, bool) and isinstance(value, int | np.integer)
+
+    if not whole(folds) or folds < 2:
+        raise ValueError(f"folds must be an integer of at least 2, got {folds!r}")
+    if not whole(horizon) or horizon < 1:
+        raise ValueError(f"horizon must be a positive integer of steps, got {horizon!r}")
+    if not whole(n_models) or n_models < 0:
+        raise ValueError(f"n_models must be a non-negative integer, got {n_models!r}")
+    values = np.asarray(list(lambdas), dtype=float)
+    if values.size == 0 or not np.all(np.isfinite(values) & (values >= 0)):
+        raise ValueError(f"lambdas must be one or more finite numbers >= 0, got {lambdas!r}")
+    if len(windows) == 0 or not all(whole(w) and w >= 1 for w in windows):
+        raise ValueError(f"windows must be one or more positive integers, got {windows!r}")
 
 
 REFIT_TOLERANCE = 1.5

@@ -340,7 +340,7 @@ def identify(
     from identification.data import PRESET_ANGLES, load_data
     from identification.fit import FitConfig, fit
     from identification.libraries import library_from_spec, spec_angles
-    from identification.selection import WINDOWS, select_model, typical_length
+    from identification.selection import WINDOWS, data_warnings, select_model, typical_length
 
     def split(text: str | None) -> list[str] | None:
         return [c.strip() for c in text.split(",") if c.strip()] if text else None
@@ -384,23 +384,18 @@ def identify(
                 first = trajs[0]
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")
-        if first.dt >= 1.0:
-            typer.echo(
-                f"warning: the time step is {first.dt:g} s: a log in milliseconds gives rates "
-                "1000 times too small (say its unit with --time-unit ms)"
-            )
         if method == "paper":
             from identification.experiments.paper import PAPER_LAMBDA, fit_paper
 
             if preset != "planar":
                 _fail("the paper's method is defined for the planar system only")
             model = fit_paper(trajs, PAPER_LAMBDA if lam_value is None else lam_value)
+            for note in data_warnings(trajs):
+                typer.echo(f"warning: {note}")
         else:
             lib = library_from_spec(
                 library or preset, first.state_names, first.input_names, declared
             )
-            for note in _degree_notes(trajs, lib):
-                typer.echo(note)
             looks = [n for n in first.state_names if _looks_like_angle(n)]
             if looks and not declared and preset is None:
                 typer.echo(
@@ -464,6 +459,8 @@ def identify(
                 model = fit(trajs, lib, config, label)
                 if library_note:
                     typer.echo(library_note)
+                for note in data_warnings(trajs, lib):  # select_model reports them itself
+                    typer.echo(f"warning: {note}")
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
     model.meta["data"] = {**dataclasses.asdict(cleaning), "summary": cleaning.summary()}
@@ -519,26 +516,6 @@ def _schema_of(path: Path) -> str | None:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         return None
     return data.get("schema") if isinstance(data, dict) else None
-
-
-def _degree_notes(trajs: list[Any], library: list[str]) -> list[str]:
-    """Notes for variables inside sin/cos/tan/sec that reach past 2 pi: logged in degrees?"""
-    import numpy as np
-
-    from identification.features import parse_term
-
-    names = [*trajs[0].state_names, *trajs[0].input_names]
-    inside = {f.var for term in library for f in parse_term(term) if f.kind in TRIG_KINDS}
-    peaks = np.max([np.nanmax(np.abs(np.column_stack([t.x, t.u])), axis=0) for t in trajs], axis=0)
-    return [
-        f"note: {name} reaches {peak:.3g} inside sin/cos: angles are in radians (a log in "
-        "degrees gives wrong models; an angle that turns several times is fine)"
-        for name, peak in zip(names, peaks, strict=True)
-        if name in inside and peak > 2 * math.pi
-    ]
-
-
-TRIG_KINDS = ("sin", "cos", "tan", "sec")
 
 
 def _number_option(flag: str, text: str, kind: type, low: float) -> Any:

@@ -170,7 +170,7 @@ def test_cli_identify_any_names_and_show(tmp_path, other_clean):
     noted = CliRunner().invoke(app, ["identify", *degrees, "--out", str(tmp_path / "d.json"),
                                      "--inputs", "thrust,moment", "--library",
                                      "degree=1;angles=roll", "--lambda", "0.001"])  # fmt: skip
-    assert "note: roll reaches" in noted.output and "radians" in noted.output
+    assert "warning: roll reaches" in noted.output and "radians" in noted.output
 
 
 def test_wrong_settings_and_copied_variables_are_refused_naming_the_cause(other_clean, tmp_path):
@@ -1267,3 +1267,69 @@ def test_a_refit_model_that_diverges_gives_way_to_the_validated_candidate(other_
     back, note = _predicts_as_validated(unstable, truth, other_clean, scale, 50, 0.0, names,
                                         other_clean[0])  # fmt: skip
     assert back is truth and "diverges on the data" in note and "8 terms" in note
+
+
+class _Frame:
+    """A minimal labelled table (what a pandas DataFrame offers Trajectory)."""
+
+    def __init__(self, values, columns):
+        self.values, self.columns = np.asarray(values), list(columns)
+
+    def __getitem__(self, names):
+        return _Frame(self.values[:, [self.columns.index(n) for n in names]], names)
+
+    def __array__(self, dtype=None, copy=None):
+        return self.values if dtype is None else self.values.astype(dtype)
+
+
+def test_the_python_api_refuses_or_flags_what_the_cli_does(other_clean, tmp_path):
+    """A notebook user gets what the command line gets: unit warnings in the report, tables
+    taken by their labels, settings and arrays that cannot work refused in one line (a trial
+    found each of these silent or an obscure numpy/pysindy error)."""
+    tr = other_clean[0]
+    # labelled columns in another order are taken by name (they were taken by position)
+    shuffled = list(reversed(PS))
+    frame = _Frame(tr.x[:, [PS.index(n) for n in shuffled]], shuffled)
+    np.testing.assert_array_equal(Trajectory(tr.t, frame, tr.u, PS, PI).x, tr.x)
+    with pytest.raises(ValueError, match=r"x's columns \['a'"):
+        Trajectory(tr.t, _Frame(tr.x, ["a", "b", "c", "d", "e", "f"]), tr.u, PS, PI)
+    # the data are copied: changing the caller's array afterwards changes nothing
+    x = tr.x.copy()
+    kept = Trajectory(tr.t, x, tr.u, PS, PI)
+    x[0, 0] = np.nan
+    assert np.isfinite(kept.x).all()
+    # degrees and milliseconds are flagged in the report, as the CLI flags them
+    degrees = [Trajectory(t.t, np.column_stack([t.x[:, :2], np.degrees(t.x[:, 2]), t.x[:, 3:]]),
+                          t.u, PS, PI) for t in other_clean]  # fmt: skip
+    _, report = select_model(degrees, planar_library(), windows=(1,), n_models=0)
+    assert any(w.startswith("phi reaches") and "radians" in w for w in report.warnings)
+    millis = [Trajectory(1000 * t.t, t.x, t.u, PS, PI) for t in other_clean]
+    _, report = select_model(millis, "planar", windows=(1,), n_models=0)  # a preset by name
+    assert any("milliseconds" in w for w in report.warnings)
+    # settings that cannot work
+    too_long = r"every window asked \(\[500\]\) is too long"
+    for kwargs, said in (({"folds": 1}, "folds must be"), ({"lambdas": []}, "lambdas must"),
+                         ({"horizon": 0}, "horizon must"), ({"n_models": -1}, "n_models must"),
+                         ({"windows": (500,)}, too_long)):  # fmt: skip
+        with pytest.raises(ValueError, match=said):
+            select_model(other_clean, planar_library(), **kwargs)
+    with pytest.raises(ValueError, match="the library is empty"):
+        select_model(other_clean, [])
+    with pytest.raises(ValueError, match="the library is empty"):
+        fit(tr, None)
+    # one file as a string, not a list of one-letter paths
+    path = write_trajectory_csv(tmp_path / "one.csv", tr)
+    segs, _ = load_data(str(path))
+    assert len(segs) == 1 and segs[0].state_names == PS
+    # a model's evaluation checks its arguments
+    model = fit(other_clean, planar_library(), FitConfig(lam=1e-3))
+    with pytest.raises(ValueError, match=r"states of shape \(\.\.\., 6\)"):
+        model.rhs(np.zeros((3, 7)), np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="same leading axes"):
+        model.rhs(np.zeros((3, 6)), np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="substeps must be a positive integer"):
+        model.simulate(tr.x[0], tr.u[:5], 0.01, substeps=0)
+    with pytest.raises(ValueError, match="precision must be"):
+        model.equations(precision=-1)
+    latex = " ".join(model.equations(latex=True))
+    assert "+ (-" not in latex and "+ -" not in latex and "e-" not in latex
