@@ -1013,7 +1013,7 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
 
     A step of a second or more is a log in milliseconds read as seconds (rates 1000 times too
     small); a variable inside sin/cos/tan/sec past 2 pi is an angle in degrees, or one that
-    turns several times (fine).
+    turns several times (fine); one that jumps by about 2 pi between rows was wrapped.
     """
     notes = []
     dt = float(np.median([t.dt for t in trajs]))
@@ -1030,6 +1030,14 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
         "gives wrong models; an angle that turns several times is fine)"
         for name, peak in zip(names, peaks, strict=True)
         if name in inside and peak > 2 * np.pi
+    ]
+    jumps = np.max([np.abs(np.diff(np.column_stack([t.x, t.u]), axis=0)).max(axis=0)
+                    for t in trajs], axis=0)  # fmt: skip
+    notes += [
+        f"{name} jumps by {jump:.3g} between two rows: a wrapped angle? Unwrap it (declare it "
+        "an angle: --angles, or clean(..., angles=...)), else its derivative is a spike"
+        for name, jump in zip(names, jumps, strict=True)
+        if name in inside and jump > 0.9 * 2 * np.pi
     ]
     return notes
 

@@ -1303,6 +1303,15 @@ def test_the_python_api_refuses_or_flags_what_the_cli_does(other_clean, tmp_path
                           t.u, PS, PI) for t in other_clean]  # fmt: skip
     _, report = select_model(degrees, planar_library(), windows=(1,), n_models=0)
     assert any(w.startswith("phi reaches") and "radians" in w for w in report.warnings)
+    wrapped = []
+    for t in other_clean:  # flown about phi = 3.1 rad and logged wrapped into (-pi, pi]
+        x = t.x.copy()
+        x[:, 2] = np.angle(np.exp(1j * (x[:, 2] + 3.1)))
+        wrapped.append(Trajectory(t.t, x, t.u, PS, PI))
+    from identification.selection import data_warnings
+
+    assert any(w.startswith("phi jumps by 6.") for w in data_warnings(wrapped, planar_library()))
+    assert not data_warnings(other_clean, planar_library())
     millis = [Trajectory(1000 * t.t, t.x, t.u, PS, PI) for t in other_clean]
     _, report = select_model(millis, "planar", windows=(1,), n_models=0)  # a preset by name
     assert any("milliseconds" in w for w in report.warnings)
@@ -1333,3 +1342,6 @@ def test_the_python_api_refuses_or_flags_what_the_cli_does(other_clean, tmp_path
         model.equations(precision=-1)
     latex = " ".join(model.equations(latex=True))
     assert "+ (-" not in latex and "+ -" not in latex and "e-" not in latex
+    import identification  # the README's entry point
+
+    assert identification.select_model is select_model and identification.Trajectory is Trajectory
