@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -374,6 +375,81 @@ def prediction_score(
                 total += sq
                 count += err.size
     return float(np.sqrt(total / max(count, 1)))
+
+
+@dataclass
+class HeldOutErrors:
+    """How a model predicts data it was not fitted on (:func:`held_out_errors`).
+
+    Attributes:
+        steps: Steps predicted from each start (the horizon).
+        starts: Start points used.
+        diverged: Starts whose prediction became non-finite (left out of the errors).
+        rms: Per state, the RMS error after ``steps`` steps.
+        state_range: Per state, its range over the data (max - min).
+        score: The selection's score on this data (``steps``-step, see
+            :func:`prediction_score`); ``hold``: the same for holding the state.
+    """
+
+    steps: int
+    starts: int
+    diverged: int
+    rms: np.ndarray
+    state_range: np.ndarray
+    score: float
+    hold: float
+
+    @property
+    def relative(self) -> np.ndarray:
+        """Per state, the RMS error after ``steps`` steps as a fraction of its range."""
+        return self.rms / np.where(self.state_range > 0, self.state_range, 1.0)
+
+
+def held_out_errors(
+    model: IdentifiedModel, trajs: Sequence[Trajectory], steps: int, max_starts: int = 64
+) -> HeldOutErrors:
+    """Open-loop prediction of held-out data with the recorded inputs, from evenly spread starts.
+
+    The figure the docs quote as "simulation error at 1 s": each start is simulated ``steps``
+    steps (RK4 over each row's own step, inputs as recorded) and compared with the recorded
+    state there. Segments shorter than ``steps + 1`` rows are skipped.
+
+    Raises:
+        ValueError: The data have other variables than the model, or no segment is long
+            enough.
+    """
+    if not isinstance(steps, int | np.integer) or steps < 1:
+        raise ValueError(f"steps must be a positive integer, got {steps!r}")
+    names = (model.state_names, model.input_names)
+    if any((t.state_names, t.input_names) != names for t in trajs):
+        raise ValueError(f"the data's variables are not the model's {names[0]} / {names[1]}")
+    usable = [t for t in trajs if len(t) > steps]
+    if not usable:
+        longest = max((len(t) for t in trajs), default=0)
+        raise ValueError(
+            f"no segment is longer than {steps} steps (the longest has {longest} rows): "
+            "predict fewer steps"
+        )
+    rhs = compile_rhs(model.feature_names, model.coefficients, *names)
+    errors, diverged, starts = [], 0, 0
+    with np.errstate(all="ignore"):
+        for tr in usable:
+            x, recorded, seen = deque(_rollouts(rhs, tr, steps, max_starts), maxlen=1)[0]
+            err = (x - recorded)[seen]
+            ok = np.all(np.isfinite(err), axis=1)
+            diverged += int(np.sum(~ok))
+            starts += len(err)
+            errors.append(err[ok])
+    stacked = np.concatenate(errors) if errors else np.zeros((0, len(names[0])))
+    rms = np.sqrt(np.mean(stacked**2, axis=0)) if len(stacked) else np.full(len(names[0]), np.inf)
+    x_all = np.concatenate([t.x for t in usable])
+    scale = score_scale(usable, steps)
+    still = lambda x, u: np.zeros_like(x)  # noqa: E731
+    return HeldOutErrors(
+        steps, starts, diverged, rms, np.ptp(x_all, axis=0),
+        prediction_score(rhs, usable, scale, steps, max_starts),
+        prediction_score(still, usable, scale, steps, max_starts),
+    )  # fmt: skip
 
 
 def integrator_resolution(
@@ -806,6 +882,7 @@ def select_model(
     seed: int = 0,
     system: str | None = None,
     progress: bool = False,
+    drop_outliers: bool = False,
 ) -> tuple[IdentifiedModel, SelectionReport]:
     """Identifies a model and chooses its sparsity and window from the data alone.
 
@@ -823,6 +900,8 @@ def select_model(
         seed: Seed of the bootstrap.
         system: Optional vehicle label stored in the model.
         progress: Show a progress bar.
+        drop_outliers: Cut out the steps whose residual stands out of their neighbours'
+            (:func:`outlying_steps`) before selecting; by default they are only reported.
 
     Returns:
         The model (scores in ``meta["selection"]``, ensemble statistics attached) and the
@@ -852,6 +931,24 @@ def select_model(
     base = config or FitConfig(optimizer="stepwise")
     TALLY.counts.clear()
     check_identifiable(Gram.stack(grams(trajs, names, "forward", 1)), names, trajs)
+    # The stage points need an rhs accurate near the data. Dense least squares is that on a
+    # well-conditioned library; on a nearly singular one (6-DOF at small tilt, condition 6e11)
+    # it is accurate on the data but wild half a step off it, so the stepwise optimizer uses
+    # its own least sparse model of the grid (the smallest threshold) instead.
+    positive = [float(v) for v in lambdas if v > 0]
+    pilot_lam = min(positive) if base.optimizer == "stepwise" and positive else 0.0
+    outliers = None
+    if drop_outliers:
+        cfg = dataclasses.replace(base, lam=pilot_lam, window=1, iterations=2, full_path=True)
+        flagged = outlying_steps(trajs, names, base.derivative,
+                                 fit_coefficients(trajs, names, cfg))  # fmt: skip
+        if flagged:
+            kept, lost = cut_steps(trajs, flagged)
+            if not kept:
+                raise ValueError("no piece of the data is long enough once the outlying "
+                                 "steps are cut out")  # fmt: skip
+            outliers = outlier_note(trajs, flagged, True, lost)
+            trajs = kept
     asked = sorted({int(w) for w in windows})
     units, windows, horizon = validation_units(trajs, folds, windows, horizon)
     if not set(asked) & set(windows):
@@ -864,12 +961,6 @@ def select_model(
     fold_of = np.arange(len(units)) % k
     scale = score_scale(units, horizon)
 
-    # The stage points need an rhs accurate near the data. Dense least squares is that on a
-    # well-conditioned library; on a nearly singular one (6-DOF at small tilt, condition 6e11)
-    # it is accurate on the data but wild half a step off it, so the stepwise optimizer uses
-    # its own least sparse model of the grid (the smallest threshold) instead.
-    positive = [float(v) for v in lambdas if v > 0]
-    pilot_lam = min(positive) if base.optimizer == "stepwise" and positive else 0.0
     # Each window's pilot starts from the previous window's (a forward-difference start only
     # for the first): its stage points are then accurate from the first pass, which keeps the
     # sparse paths short (6-DOF: a third of the time).
@@ -939,6 +1030,11 @@ def select_model(
     )
     report = SelectionReport(candidates, chosen, k, horizon, rule)
     report.warnings += data_warnings(trajs, names)
+    if outliers is None and 1 in pilots:  # the window-1 pilot is such a fit already
+        flagged = outlying_steps(trajs, names, base.derivative, pilots[1])
+        outliers = outlier_note(trajs, flagged, False) if flagged else None
+    if outliers:
+        report.warnings.append(outliers)
     still = lambda x, u: np.zeros_like(x)  # noqa: E731
     report.hold = float(np.mean([
         prediction_score(still, [u for u, fo in zip(units, fold_of, strict=True) if fo == f],
@@ -1003,6 +1099,108 @@ def select_model(
     model = IdentifiedModel(names, xi, first.state_names, first.input_names, system, meta,
                             std, prob)  # fmt: skip
     return model, report
+
+
+OUTLIER_Z = 10.0
+"""A row stands out where its one-step residual departs from its neighbours' by more than this
+many robust deviations (Gaussian noise: a chance of 1e-23 per row)."""
+
+
+def outlying_steps(
+    trajs: Sequence[Trajectory], names: list[str], derivative: str, xi: np.ndarray
+) -> dict[int, np.ndarray]:
+    """The steps whose residual stands out of their neighbours', per trajectory.
+
+    The residual of each step (window 1) under ``xi``, a fit of the whole library, is
+    compared with the median of its 11 neighbours; a step stands out where that departure
+    exceeds :data:`OUTLIER_Z` robust deviations (1.4826 times the median absolute departure,
+    per equation, at least 1e-6 of the target's spread). Smooth misfit (a missing drag term)
+    moves the neighbours too; an input that did not act as logged (a command that saturated
+    the rotors, a glitch) does not.
+
+    Returns:
+        {trajectory index: (rows, states) mask}, rows in the order :func:`iter_rows` yields
+        them (the observed steps); empty where nothing stands out or a formulation other
+        than the step-wise ones is used.
+    """
+    from scipy.ndimage import median_filter
+
+    if derivative not in ("rk4", "forward"):
+        return {}
+    parts: dict[int, list[np.ndarray]] = {}
+    targets = []
+    with np.errstate(all="ignore"):
+        for i, theta, y in iter_rows(trajs, names, derivative, 1, xi):
+            parts.setdefault(i, []).append(y - theta @ xi.T)
+            targets.append(y)
+        local = {}
+        for i, chunks in parts.items():
+            r = np.concatenate(chunks)
+            local[i] = r - median_filter(r, size=(11, 1), mode="nearest")
+        stacked = np.concatenate(list(local.values()))
+        if not np.all(np.isfinite(stacked)):
+            return {}
+        floor = 1e-6 * np.concatenate(targets).std(axis=0)
+        deviation = np.maximum(1.4826 * np.median(np.abs(stacked), axis=0), floor)
+        deviation = np.where(deviation > 0, deviation, 1.0)
+        flagged = {i: np.abs(v) / deviation > OUTLIER_Z for i, v in local.items()}
+    return {i: f for i, f in flagged.items() if f.any()}
+
+
+def _step_rows(tr: Trajectory) -> np.ndarray:
+    """The rows whose steps :func:`iter_rows` yields at window 1 (both ends observed)."""
+    seen = tr.observed
+    return np.flatnonzero(seen[:-1] & seen[1:])
+
+
+def cut_steps(
+    trajs: Sequence[Trajectory], flagged: dict[int, np.ndarray]
+) -> tuple[list[Trajectory], int]:
+    """The trajectories split at the flagged steps; pieces under :data:`MIN_UNIT_ROWS` go.
+
+    Returns:
+        The pieces and the number of rows lost in pieces too short to keep.
+    """
+    out: list[Trajectory] = []
+    lost = 0
+    for i, tr in enumerate(trajs):
+        if i not in flagged:
+            out.append(tr)
+            continue
+        start = 0
+        for k in [*_step_rows(tr)[flagged[i].any(axis=1)], len(tr) - 1]:
+            stop = int(k) + 1  # the piece keeps sample k, not the step from k to k + 1
+            if stop - start >= MIN_UNIT_ROWS:
+                out.append(tr.slice(start, stop))
+            else:
+                lost += stop - start
+            start = stop
+    return out, lost
+
+
+def outlier_note(
+    trajs: Sequence[Trajectory], flagged: dict[int, np.ndarray], dropped: bool, lost: int = 0
+) -> str:
+    """What :func:`outlying_steps` found, and whether the steps were cut out."""
+    count = int(sum(f.any(axis=1).sum() for f in flagged.values()))
+    total = sum(len(_step_rows(t)) for t in trajs)
+    where = sorted({trajs[0].state_names[j] for f in flagged.values()
+                    for j in np.flatnonzero(f.any(axis=0))})  # fmt: skip
+    times = sorted(float(trajs[i].t[k]) for i, f in flagged.items()
+                   for k in _step_rows(trajs[i])[f.any(axis=1)])  # fmt: skip
+    shown = ", ".join(f"{v:.4g}" for v in times[:6]) + (", ..." if len(times) > 6 else "")
+    found = (
+        f"{count} step(s) of {total} stand more than {OUTLIER_Z:g} robust deviations out of "
+        f"their neighbours' residuals in {', '.join(w + chr(39) for w in where)} "
+        f"(at t = {shown} s): inputs that did not act as logged (saturated actuators: log the "
+        "applied inputs), glitches, or abrupt effects the library lacks (gusts)"
+    )
+    if dropped:
+        return f"cut out {found}" + (f"; {lost} rows in pieces too short to keep" if lost else "")
+    return (
+        f"{found}; kept (on real flights cutting them out predicted held-out flights worse): "
+        "--drop-outliers (drop_outliers=True) cuts them out"
+    )
 
 
 TRIG_KINDS = ("sin", "cos", "tan", "sec")

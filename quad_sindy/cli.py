@@ -35,6 +35,8 @@ TimeUnit = Enum("TimeUnit", {name: name for name in ("s", "ms", "us", "ns")}, ty
 """Units of a numeric time column."""
 SECONDS_PER = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 
+TRIG_KINDS = ("sin", "cos", "tan", "sec")
+
 PresetName = Enum("PresetName", {name: name for name in ("planar", "quad6dof")}, type=str)
 """The vehicles whose variable names and library ``identify`` knows."""
 
@@ -328,6 +330,14 @@ def identify(
     method: Annotated[str, typer.Option(help="rk4 | forward | central | smoothed | paper")] = "rk4",
     optimizer: Annotated[str, typer.Option(help="stepwise | stlsq | sr3 | ensemble")] = "stepwise",
     window: Annotated[str, typer.Option(help="integral window: 'auto' or steps")] = "auto",
+    drop_outliers: Annotated[
+        bool,
+        typer.Option(
+            help="cut out the steps whose residual stands out of their neighbours' (inputs "
+            "that did not act as logged, glitches) before selecting; by default they are "
+            "reported"
+        ),
+    ] = False,
     plot: Annotated[Path | None, typer.Option(help="selection plot (default: OUT.png)")] = None,
 ) -> None:
     """Identifies a SINDy-with-control model from data alone and prints its equations.
@@ -439,8 +449,9 @@ def identify(
                         f"a quarter of the typical segment ({typical_length(trajs)} rows)"
                     )
                 model, report = select_model(
-                    trajs, lib, config=config, windows=windows, system=label, progress=True
-                )
+                    trajs, lib, config=config, windows=windows, system=label, progress=True,
+                    drop_outliers=drop_outliers,
+                )  # fmt: skip
                 best = report.best
                 if library_note:
                     typer.echo(library_note)
@@ -455,6 +466,8 @@ def identify(
                     typer.echo(f"warning: {note}")
                 report.plot(plot or out.with_suffix(".png"))
             else:
+                if drop_outliers:
+                    _fail("--drop-outliers works with the automatic selection (--lambda auto)")
                 config = dataclasses.replace(config, lam=lam_value, window=window_value or 1)
                 model = fit(trajs, lib, config, label)
                 if library_note:
@@ -467,6 +480,62 @@ def identify(
     model.save(out)
     typer.echo("\n".join(model.equations()))
     typer.echo(f"wrote {out}")
+
+
+@app.command()
+def score(
+    model: Annotated[Path, typer.Argument(help="identified model JSON")],
+    data: Annotated[list[Path], typer.Argument(help="held-out CSV, parquet or NPZ files")],
+    seconds: Annotated[float, typer.Option(help="prediction horizon [s]")] = 1.0,
+    time: Annotated[str, typer.Option(help="time column")] = "t",
+    time_unit: Annotated[
+        TimeUnit, typer.Option(help="unit of a numeric time column (timestamps are read as such)")
+    ] = TimeUnit.s,
+) -> None:
+    """Predicts held-out logs open loop with their recorded inputs: error after --seconds.
+
+    From up to 64 evenly spread starts per segment, the model is simulated with the logged
+    inputs and compared with the logged state: the RMS error per state as a share of its
+    range, and the selection's score against holding the state. The logs are read and
+    cleaned as ``identify`` reads them, with the model's variables.
+    """
+    from identification.data import load_data
+    from identification.features import parse_term
+    from identification.model import load_model
+    from identification.selection import held_out_errors
+
+    if not (math.isfinite(seconds) and seconds > 0):
+        _fail(f"--seconds must be a positive number, got {seconds:g}")
+    try:
+        loaded = load_model(model)
+        variables = set(loaded.state_names)
+        angles = sorted({f.var for n in loaded.feature_names for f in parse_term(n)
+                         if f.kind in TRIG_KINDS and f.var in variables})  # fmt: skip
+        trajs, cleaning = load_data(
+            data, states=loaded.state_names, inputs=loaded.input_names, time=time,
+            angles=angles, measured=loaded.meta.get("measured_inputs", ()),
+            time_unit=SECONDS_PER[time_unit.value],
+        )  # fmt: skip
+        dt = float(sorted(t.dt for t in trajs)[len(trajs) // 2])  # the median segment step
+        steps = max(1, int(round(seconds / dt)))
+        result = held_out_errors(loaded, trajs, steps)
+    except (ValueError, FileNotFoundError) as exc:
+        _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
+    if cleaning.changed:
+        typer.echo(f"data: {cleaning.summary()}")
+    typer.echo(
+        f"after {steps * dt:g} s ({steps} steps) from {result.starts} starts, RMS error as a "
+        "share of each state's range on this data:"
+    )
+    for name, rel, rms in zip(loaded.state_names, result.relative, result.rms, strict=True):
+        typer.echo(f"  {name}: {rel:.2%} ({rms:.3g})")
+    typer.echo(
+        f"score ({steps}-step prediction error over each state's scale, as identify's "
+        f"selection): {result.score:.3g}; holding the state: {result.hold:.3g}"
+    )
+    if result.diverged:
+        typer.echo(f"warning: the prediction diverged from {result.diverged} of "
+                   f"{result.starts} starts (left out of the errors above)")  # fmt: skip
 
 
 @app.command()

@@ -1345,3 +1345,68 @@ def test_the_python_api_refuses_or_flags_what_the_cli_does(other_clean, tmp_path
     import identification  # the README's entry point
 
     assert identification.select_model is select_model and identification.Trajectory is Trajectory
+
+
+def test_steps_where_inputs_did_not_act_as_logged_are_reported_and_cut_on_request(tmp_path):
+    """A log of the *commands* of a vehicle whose rotors saturated on 4 of 3000 steps (sigma =
+    1e-3): the steps are named; selection keeps them by default (on real flights cutting
+    them predicted held-out flights worse) and, asked to, cuts them out and finds the exact
+    model that the applied inputs give."""
+    from identification.rollouts import excitation_rollouts
+    from identification.selection import outlying_steps
+
+    veh = {"mass": "0.5", "Ixx": "3e-3", "arm_length": "0.15", "rotor_force_max": "4.905"}
+    flown = excitation_rollouts("PlanarQuad-v0", 3, seed=1, env_kwargs={"params": veh})
+    rng = np.random.default_rng(0)
+    saturated = sum(int(np.any(np.abs(t.u - t.meta["commanded"]) > 1e-9, axis=1).sum())
+                    for t in flown)  # fmt: skip
+    assert 0 < saturated < 10
+    logged = [Trajectory(t.t, t.x + 1e-3 * rng.standard_normal(t.x.shape), t.meta["commanded"],
+                         PS, PI) for t in flown]  # fmt: skip
+    _, report = select_model(logged, planar_library(), n_models=0)
+    said = [w for w in report.warnings if "stand more than 10 robust deviations" in w]
+    assert len(said) == 1 and "phi_dot'" in said[0] and "--drop-outliers" in said[0], said
+    model, report = select_model(logged, planar_library(), n_models=0, drop_outliers=True)
+    assert any(w.startswith("cut out") for w in report.warnings)
+    truth = truth_planar(PlanarQuadParams(mass=0.5, Ixx=3e-3))
+    assert check_support(model, truth).exact_support
+    # the applied inputs: nothing stands out, nothing is said
+    applied = [Trajectory(t.t, t.x, t.u, PS, PI) for t in flown]
+    _, report = select_model(applied, planar_library(), n_models=0)
+    assert not any("robust deviations" in w for w in report.warnings)
+    xi = fit(applied, planar_library(), FitConfig(lam=1e-6)).coefficients
+    assert outlying_steps(applied, planar_library(), "rk4", xi) == {}
+    path = str(write_trajectory_csv(tmp_path / "log.csv", logged[0]))
+    refused = CliRunner().invoke(app, ["identify", path, "--out", str(tmp_path / "m.json"),
+                                       "--lambda", "0.01", "--drop-outliers"])  # fmt: skip
+    assert refused.exit_code == 2 and "--drop-outliers works with" in refused.output
+
+
+def test_score_predicts_held_out_flights_against_an_analytic_reference(tmp_path, other_clean):
+    """``score``: open-loop prediction of held-out logs with their recorded inputs. The true
+    model predicts them to round-off; one whose gravity is 0.81 m/s^2 off misses z by
+    0.81 t^2 / 2 = 0.405 m after 1 s from every start (nothing else depends on z)."""
+    from identification.experiments.truth import truth_matrix
+    from identification.selection import held_out_errors
+
+    held = planar_flights(OTHER_PLANAR, FlightSpec(flights=2, steps=400, seed=11))
+    names = planar_library()
+    truth = truth_planar(OTHER_PLANAR)
+    exact = IdentifiedModel(names, truth_matrix(truth, PS, names), PS, PI)
+    result = held_out_errors(exact, held, 100)
+    assert result.starts == 128 and result.diverged == 0
+    assert np.all(result.relative < 1e-6) and result.score < 1e-6 * result.hold
+    truth["z_dot"]["1"] = -9.0
+    off = IdentifiedModel(names, truth_matrix(truth, PS, names), PS, PI)
+    result = held_out_errors(off, held, 100)
+    np.testing.assert_allclose(result.rms[1], 0.5 * 0.81 * 1.0**2, rtol=1e-6)
+    np.testing.assert_allclose(result.rms[[0, 2, 3, 5]], 0.0, atol=1e-9)
+    # the command reads the logs as identify does and prints the same figures
+    paths = [str(write_trajectory_csv(tmp_path / f"h{i}.csv", t)) for i, t in enumerate(held)]
+    off.save(tmp_path / "off.json")
+    shown = CliRunner().invoke(app, ["score", str(tmp_path / "off.json"), *paths])
+    assert shown.exit_code == 0, shown.output
+    share = 0.405 / np.ptp(np.concatenate([t.x[:, 1] for t in held]))
+    assert f"  z: {share:.2%} (0.405)" in shown.output
+    bad = CliRunner().invoke(app, ["score", str(tmp_path / "off.json"), *paths, "--seconds", "9"])
+    assert bad.exit_code == 2 and "no segment is longer than 900 steps" in bad.output
