@@ -322,7 +322,10 @@ def identify(
     ] = None,
     library: Annotated[
         str | None,
-        typer.Option(help="planar | quad6dof | FILE.toml | 'degree=2;angles=phi;extra=...'"),
+        typer.Option(
+            help="planar | quad6dof | planar_drag | quad6dof_drag | FILE.toml | "
+            "'degree=2;angles=phi;extra=...'"
+        ),
     ] = None,
     lam: Annotated[
         str, typer.Option("--lambda", help="'auto' (validated) or a threshold")
