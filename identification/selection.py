@@ -110,6 +110,11 @@ POOR_FIT = 0.5
 """A chosen model whose held-out score is above this fraction of holding the state's is
 reported as a poor fit (a warning; the model is still returned)."""
 
+MISFIT_WINDOW, MISFIT_SHRINK, MISFIT_FLOOR = 16, 1.5, 1e-5
+"""An equation whose residual (relative to its target's spread, above the floor) shrinks by
+less than ``MISFIT_SHRINK`` from window 1 to window ``MISFIT_WINDOW`` is reported: white
+measurement noise in the residual shrinks about as 1 / window, misfit does not."""
+
 
 def standard_error(values: np.ndarray) -> float:
     """Standard error of the mean of ``values`` (0 for a single value)."""
@@ -1084,6 +1089,9 @@ def select_model(
         report.warnings = [w for w in report.warnings if not w.startswith(stale)]
     if not np.any(xi):
         raise ValueError(_empty_model_message(candidates, report.hold))
+    misfit = misfit_note(used, names, base.derivative, xi)
+    if misfit:
+        report.warnings.append(misfit)
     report.final_terms = int(np.count_nonzero(xi))
     tally = TALLY.summary()
     if tally:
@@ -1145,6 +1153,55 @@ def outlying_steps(
         deviation = np.where(deviation > 0, deviation, 1.0)
         flagged = {i: np.abs(v) / deviation > OUTLIER_Z for i, v in local.items()}
     return {i: f for i, f in flagged.items() if f.any()}
+
+
+def _relative_residuals(
+    trajs: Sequence[Trajectory], names: list[str], derivative: str, window: int, xi: np.ndarray
+) -> np.ndarray:
+    """Per equation, the RMS residual of ``xi`` at ``window`` over the target's spread."""
+    total = np.zeros(xi.shape[0])
+    targets: list[np.ndarray] = []
+    count = 0
+    with np.errstate(all="ignore"):
+        for _, theta, y in iter_rows(trajs, names, derivative, window, xi):
+            total += np.sum((y - theta @ xi.T) ** 2, axis=0)
+            count += len(y)
+            targets.append(y)
+        spread = np.concatenate(targets).std(axis=0) if targets else np.ones(xi.shape[0])
+    return np.sqrt(total / max(count, 1)) / np.where(spread > 0, spread, 1.0)
+
+
+def misfit_note(
+    trajs: Sequence[Trajectory], names: list[str], derivative: str, xi: np.ndarray
+) -> str | None:
+    """A warning for equations whose residual is not white noise (see :data:`MISFIT_SHRINK`).
+
+    The residual of the model at window 1 and at :data:`MISFIT_WINDOW` is compared: white
+    measurement noise in the targets shrinks about as 1 / window, while a term the library
+    lacks (Z-Y-X angles logged under Z-X-Y names) leaves the same residual at every window.
+    Residuals at round-off (:data:`MISFIT_FLOOR`) are not judged. Filtered (time-correlated)
+    noise shrinks less too, so the note names that cause as well.
+    """
+    if derivative not in ("rk4", "forward"):
+        return None
+    usable = long_enough(trajs, 4 * MISFIT_WINDOW)
+    if not usable:
+        return None
+    one = _relative_residuals(usable, names, derivative, 1, xi)
+    wide = _relative_residuals(usable, names, derivative, MISFIT_WINDOW, xi)
+    flagged = [i for i in range(len(one))
+               if one[i] > MISFIT_FLOOR and one[i] < MISFIT_SHRINK * wide[i]]  # fmt: skip
+    if not flagged:
+        return None
+    states = trajs[0].state_names
+    listed = ", ".join(f"{states[i]}' ({one[i]:.2g} at window 1, {wide[i]:.2g} at "
+                       f"{MISFIT_WINDOW})" for i in flagged)  # fmt: skip
+    return (
+        f"the residual of {listed} (a share of each target's spread) does not shrink with the "
+        "integral window as measurement noise does: the library may lack a term, the "
+        "variables may follow another convention (Z-Y-X angles, world-frame velocities), or "
+        "the states' noise is correlated in time (filtered estimates)"
+    )
 
 
 def _step_rows(tr: Trajectory) -> np.ndarray:

@@ -1410,3 +1410,22 @@ def test_score_predicts_held_out_flights_against_an_analytic_reference(tmp_path,
     assert f"  z: {share:.2%} (0.405)" in shown.output
     bad = CliRunner().invoke(app, ["score", str(tmp_path / "off.json"), *paths, "--seconds", "9"])
     assert bad.exit_code == 2 and "no segment is longer than 900 steps" in bad.output
+
+
+def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean):
+    """White measurement noise in the targets shrinks about as 1 / window; a term the library
+    lacks leaves the same residual at every window (a held-out trial's Z-Y-X log, 38
+    stand-in terms and no warning)."""
+    from identification.experiments.truth import truth_matrix
+    from identification.selection import misfit_note
+
+    names = planar_library()
+    exact = truth_matrix(truth_planar(OTHER_PLANAR), PS, names)
+    assert misfit_note(other_clean, names, "rk4", exact) is None  # round-off is not judged
+    for sigma in (1e-3, 1e-2):
+        noisy = add_noise(other_clean, sigma, seed=3)
+        assert misfit_note(noisy, names, "rk4", exact) is None, sigma
+    lacking = [n for n in names if n != "cos(phi) u1"]
+    _, report = select_model(other_clean, lacking, **FAST)
+    said = [w for w in report.warnings if "does not shrink with the integral window" in w]
+    assert len(said) == 1 and said[0].startswith("the residual of z_dot' ("), said
