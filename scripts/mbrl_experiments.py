@@ -6,20 +6,22 @@ TASK is ``ENV:TASK`` (default: PlanarQuad-v0:figure8 Quad6DOF-v0:hover Quad6DOF-
 Each experiment resumes where it stopped; the summary line is what docs/mbrl.md reports.
 """
 
-import sys
+import argparse
 from pathlib import Path
 
 from agents.mbrl import MBRLConfig, run_experiment
 
-args = sys.argv[1:]
-workers = 1
-if "--workers" in args:
-    at = args.index("--workers")
-    workers = int(args[at + 1])
-    del args[at : at + 2]
-out = Path(args[0] if args else "out/mbrl")
-tasks = args[1:] or ["PlanarQuad-v0:figure8", "Quad6DOF-v0:hover", "Quad6DOF-v0:random"]
-for spec in tasks:
+TASKS = ["PlanarQuad-v0:figure8", "Quad6DOF-v0:hover", "Quad6DOF-v0:random"]
+
+parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser.add_argument("out", nargs="?", default="out/mbrl", help="output folder (resumes)")
+parser.add_argument("tasks", nargs="*", default=TASKS, help="ENV:TASK pairs")
+parser.add_argument("--workers", type=int, default=1, help="parallel jobs (>1 needs Ray)")
+args = parser.parse_args()
+out, workers = Path(args.out), args.workers
+for spec in args.tasks:
+    if spec.count(":") != 1:
+        parser.error(f"a task is ENV:TASK (PlanarQuad-v0:figure8), got {spec!r}")
     env_id, task = spec.split(":")
     folder = out / f"{env_id}_{task}"
     result = run_experiment(MBRLConfig(env_id=env_id, task=task), folder, 5, workers)

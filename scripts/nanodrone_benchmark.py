@@ -3,14 +3,19 @@
 Usage: python scripts/nanodrone_benchmark.py [DATA_DIR] [OUT_DIR] [TEST_FILE ...]
 """
 
-import sys
+import argparse
 from pathlib import Path
 
 from identification.experiments.nanodrone import run_benchmark
 
 if __name__ == "__main__":
     repo = Path(__file__).resolve().parents[1]
-    data = Path(sys.argv[1]) if len(sys.argv) > 1 else repo.parent / "shared/data/nanodrone"
-    out = Path(sys.argv[2]) if len(sys.argv) > 2 else repo / "out/nanodrone"
-    metrics = run_benchmark(data, sys.argv[3:] or None, out)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("data", nargs="?", default=repo.parent / "shared/data/nanodrone",
+                        type=Path, help="folder of the flights")  # fmt: skip
+    parser.add_argument("out", nargs="?", default=repo / "out/nanodrone", type=Path)
+    parser.add_argument("tests", nargs="*", help="test flights (default: the protocol's)")
+    args = parser.parse_args()
+    data, out = args.data, args.out
+    metrics = run_benchmark(data, args.tests or None, out)
     print((out / "report.md").read_text())

@@ -7,14 +7,16 @@ from case C (ours and the paper's method), fly A and B on the identified models,
 report, and print what a reader of the paper compares.
 """
 
-import sys
+import argparse
 from pathlib import Path
 
 from identification.experiments.reproduce import run
 
 SHARED_CSV = Path(__file__).resolve().parents[2] / "shared/reference/paper_diamond_case_c.csv"
 
-out = Path(sys.argv[1] if len(sys.argv) > 1 else "out/reproduce")
+parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser.add_argument("out", nargs="?", default="out/reproduce", help="output folder")
+out = Path(parser.parse_args().out)
 metrics = run(out, authors_csv=SHARED_CSV if SHARED_CSV.exists() else None)
 for label in ("ours", "paper_method"):
     result = metrics[label]
