@@ -378,11 +378,21 @@ def run_experiment(
     started = time.perf_counter()
     run_jobs(run_job, todo, workers, address, on_done=save)
     wall = time.perf_counter() - started
+    # each session's jobs and time, so a resume keeps what the earlier runs took
+    previous = out / "mbrl.json"
+    saved = json.loads(previous.read_text()) if previous.exists() else {}
+    sessions = saved.get("sessions", [saved["run"]] if "run" in saved else [])
+    sessions.append({"jobs": len(todo), "workers": workers, "wall_seconds": wall})
     results = {
         "config": settings,
         "runs": runs,
         "summary": summarize(runs, seed_list),
-        "run": {"jobs": len(todo), "workers": workers, "wall_seconds": wall},
+        "run": {
+            "jobs": sum(r["jobs"] for r in sessions),
+            "workers": workers,
+            "wall_seconds": sum(r["wall_seconds"] for r in sessions),
+        },  # fmt: skip
+        "sessions": sessions,
     }
     write_json(out / "mbrl.json", results)
     plot_curves(results, out / "mbrl.png")

@@ -505,7 +505,7 @@ def score(
     from identification.data import load_data
     from identification.features import parse_term
     from identification.model import load_model
-    from identification.selection import held_out_errors
+    from identification.selection import data_warnings, held_out_errors
 
     if not (math.isfinite(seconds) and seconds > 0):
         _fail(f"--seconds must be a positive number, got {seconds:g}")
@@ -519,13 +519,28 @@ def score(
             angles=angles, measured=loaded.meta.get("measured_inputs", ()),
             time_unit=SECONDS_PER[time_unit.value],
         )  # fmt: skip
-        dt = float(sorted(t.dt for t in trajs)[len(trajs) // 2])  # the median segment step
-        steps = max(1, int(round(seconds / dt)))
+        periods = sorted(t.dt for t in trajs)
+        if periods[-1] > 1.01 * periods[0]:  # one horizon in steps must be one in seconds
+            _fail(f"the logs' sample steps differ ({periods[0]:g} s to {periods[-1]:g} s): "
+                  "score logs of one sample step at a time")  # fmt: skip
+        dt = periods[len(periods) // 2]
+        if not seconds / dt < 1e9:
+            _fail(f"--seconds {seconds:g} is {seconds / dt:.3g} steps of {dt:g} s: too many")
+        steps = int(round(seconds / dt))
+        if steps < 1 or abs(steps * dt - seconds) > 0.25 * seconds:
+            _fail(f"--seconds {seconds:g} is not a whole number of the logs' {dt:g} s steps "
+                  f"(nearest: {max(steps, 1) * dt:g} s)")  # fmt: skip
         result = held_out_errors(loaded, trajs, steps)
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
     if cleaning.changed:
         typer.echo(f"data: {cleaning.summary()}")
+    for note in data_warnings(trajs, loaded.feature_names):
+        typer.echo(f"warning: {note}")
+    short = [t for t in trajs if len(t) <= steps]
+    if short:
+        typer.echo(f"note: {len(short)} of {len(trajs)} segment(s) ({sum(map(len, short))} rows) "
+                   f"are not longer than {steps} steps and are left out")  # fmt: skip
     typer.echo(
         f"after {steps * dt:g} s ({steps} steps) from {result.starts} starts, RMS error as a "
         "share of each state's range on this data:"

@@ -316,3 +316,10 @@ def test_vector_reset_info_is_the_single_envs_member_by_member(env_id):
         assert set(info) <= set(infos)
         for key, value in info.items():
             np.testing.assert_allclose(infos[key][i], value, err_msg=key)
+    single = gym.make(env_id)
+    single.reset(seed=5)
+    action = single.action_space.sample()
+    *_, info = single.step(action)
+    *_, infos = venv.step(np.tile(action, (3, 1)))
+    assert set(info) <= set(infos)  # out_of_bounds was missing from the vector env's step
+    np.testing.assert_allclose(infos["state"][0], info["state"])

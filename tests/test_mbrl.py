@@ -62,6 +62,9 @@ def test_experiment_runs_saves_each_job_and_resumes(tmp_path):
     again = run_experiment(TINY, tmp_path, seeds=2, echo=messages.append)
     assert messages[0].startswith("0 jobs to run, 4 loaded")
     assert again["summary"] == json.loads(json.dumps(first["summary"]))
+    # the first session's jobs and time stay on record (a resume wrote 0 jobs in ~0 s)
+    assert again["run"]["jobs"] == first["run"]["jobs"] == 4 and len(again["sessions"]) == 2
+    assert again["run"]["wall_seconds"] >= first["run"]["wall_seconds"] > 0
     with pytest.raises(ValueError, match=r"another configuration \(.*iterations: \d+ there, 3"):
         run_experiment(MBRLConfig(iterations=3), tmp_path, seeds=2)
     # one seed fewer is the same experiment: its jobs are loaded (a trial could not extend

@@ -1366,6 +1366,11 @@ def test_steps_where_inputs_did_not_act_as_logged_are_reported_and_cut_on_reques
     _, report = select_model(logged, planar_library(), n_models=0)
     said = [w for w in report.warnings if "stand more than 10 robust deviations" in w]
     assert len(said) == 1 and "phi_dot'" in said[0] and "--drop-outliers" in said[0], said
+    _, report = select_model(logged, planar_library(), windows=(4,), n_models=0)
+    assert any("robust deviations" in w for w in report.warnings)  # no window 1 in the grid
+    with pytest.raises(ValueError, match="drop_outliers works with the rk4 and forward"):
+        select_model(logged, planar_library(), config=FitConfig(derivative="central"),
+                     drop_outliers=True)  # fmt: skip
     model, report = select_model(logged, planar_library(), n_models=0, drop_outliers=True)
     assert any(w.startswith("cut out") for w in report.warnings)
     truth = truth_planar(PlanarQuadParams(mass=0.5, Ixx=3e-3))
@@ -1410,6 +1415,21 @@ def test_score_predicts_held_out_flights_against_an_analytic_reference(tmp_path,
     assert f"  z: {share:.2%} (0.405)" in shown.output
     bad = CliRunner().invoke(app, ["score", str(tmp_path / "off.json"), *paths, "--seconds", "9"])
     assert bad.exit_code == 2 and "no segment is longer than 900 steps" in bad.output
+    # logs at two sample steps would mix horizons under one label (a trial: "1 s" was 0.5 s)
+    coarse = planar_flights(OTHER_PLANAR, FlightSpec(flights=1, steps=200, dt=0.02, seed=12))
+    mixed = [*paths, str(write_trajectory_csv(tmp_path / "coarse.csv", coarse[0]))]
+    bad = CliRunner().invoke(app, ["score", str(tmp_path / "off.json"), *mixed])
+    assert bad.exit_code == 2 and "sample steps differ" in bad.output
+    for seconds, said in (("0.001", "not a whole number"), ("1e308", "too many")):
+        bad = CliRunner().invoke(app, ["score", str(tmp_path / "off.json"), *paths,
+                                       "--seconds", seconds])  # fmt: skip
+        assert bad.exit_code == 2 and said in bad.output, bad.output
+    # a log in milliseconds is flagged as identify flags it
+    millis = Trajectory(1000 * held[0].t, held[0].x, held[0].u, PS, PI)
+    path = str(write_trajectory_csv(tmp_path / "ms.csv", millis))
+    flagged = CliRunner().invoke(app, ["score", str(tmp_path / "off.json"), path,
+                                       "--seconds", "1000"])  # fmt: skip
+    assert "milliseconds" in flagged.output, flagged.output
 
 
 def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean):

@@ -809,6 +809,7 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             "action": u,
             "commanded": u_cmd,
             "time": self._steps * self.dt,
+            "out_of_bounds": terminated.copy(),  # as the single env's step info
         }
         if self._rotor_state:
             info["rotor_thrusts"] = states[:, self._n :]
