@@ -1146,12 +1146,12 @@ def outlying_steps(
 ) -> dict[int, np.ndarray]:
     """The steps whose residual stands out of their neighbours', per trajectory.
 
-    The residual of each step (window 1) under ``xi``, a fit of the whole library, is
-    compared with the median of its 11 neighbours; a step stands out where that departure
-    exceeds :data:`OUTLIER_Z` robust deviations (1.4826 times the median absolute departure,
-    per equation, at least :data:`OUTLIER_FLOOR` of the target's spread). Smooth misfit (a
-    missing drag term) moves the neighbours too; an input that did not act as logged (a
-    command that saturated the rotors, a glitch) does not.
+    The residual of each step (window 1) under ``xi`` (a fit of the whole library, or the
+    selected model) is compared with the median of its 11 neighbours; a step stands out
+    where that departure exceeds :data:`OUTLIER_Z` robust deviations (1.4826 times the
+    median absolute departure, per equation, at least :data:`OUTLIER_FLOOR` of the target's
+    spread). Smooth misfit (a missing drag term) moves the neighbours too; an input that did
+    not act as logged (a command that saturated the rotors, a glitch) does not.
 
     Returns:
         {trajectory index: (rows, states) mask}, rows in the order :func:`iter_rows` yields
@@ -1282,7 +1282,8 @@ def outlier_note(
         "applied inputs), glitches, or abrupt effects the library lacks (gusts)"
     )
     if dropped:
-        return f"cut out {found}" + (f"; {lost} rows in pieces too short to keep" if lost else "")
+        lost_note = f"; {lost} rows in pieces too short to keep" if lost else ""
+        return f"cut out before selecting: {found}{lost_note}"
     return (
         f"{found}; kept (on real flights cutting them out predicted held-out flights worse): "
         "--drop-outliers (drop_outliers=True) cuts them out"

@@ -35,8 +35,6 @@ TimeUnit = Enum("TimeUnit", {name: name for name in ("s", "ms", "us", "ns")}, ty
 """Units of a numeric time column."""
 SECONDS_PER = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 
-TRIG_KINDS = ("sin", "cos", "tan", "sec")
-
 PresetName = Enum("PresetName", {name: name for name in ("planar", "quad6dof")}, type=str)
 """The vehicles whose variable names and library ``identify`` knows."""
 
@@ -505,7 +503,7 @@ def score(
     from identification.data import load_data
     from identification.features import parse_term
     from identification.model import load_model
-    from identification.selection import data_warnings, held_out_errors
+    from identification.selection import TRIG_KINDS, data_warnings, held_out_errors
 
     if not (math.isfinite(seconds) and seconds > 0):
         _fail(f"--seconds must be a positive number, got {seconds:g}")
