@@ -380,8 +380,8 @@ def run_experiment(
     wall = time.perf_counter() - started
     # each session's jobs and time, so a resume keeps what the earlier runs took
     previous = out / "mbrl.json"
-    saved = json.loads(previous.read_text()) if previous.exists() else {}
-    sessions = saved.get("sessions", [saved["run"]] if "run" in saved else [])
+    before = json.loads(previous.read_text()) if previous.exists() else {}
+    sessions = before.get("sessions", [before["run"]] if "run" in before else [])
     sessions.append({"jobs": len(todo), "workers": workers, "wall_seconds": wall})
     results = {
         "config": settings,

@@ -1301,6 +1301,11 @@ def outlier_note(
 TRIG_KINDS = ("sin", "cos", "tan", "sec")
 
 
+def trig_variables(feature_names: Sequence[str]) -> set[str]:
+    """The variables a library puts inside sin, cos, tan or sec (its angles)."""
+    return {f.var for term in feature_names for f in parse_term(term) if f.kind in TRIG_KINDS}
+
+
 def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()) -> list[str]:
     """Signs that the data are not in the units the fit assumes: seconds and radians.
 
@@ -1316,7 +1321,7 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
             "(say its unit: --time-unit ms, or time_unit=1e-3 in load_data)"
         )
     names = [*trajs[0].state_names, *trajs[0].input_names]
-    inside = {f.var for term in feature_names for f in parse_term(term) if f.kind in TRIG_KINDS}
+    inside = trig_variables(feature_names)
     peaks = np.max([np.abs(np.column_stack([t.x, t.u])).max(axis=0) for t in trajs], axis=0)
     notes += [
         f"{name} reaches {peak:.3g} inside sin/cos: angles are in radians (a log in degrees "

@@ -65,15 +65,15 @@ def _in_order(model: IdentifiedModel, states: tuple, inputs: tuple) -> Identifie
 
 def _mismatch(model: IdentifiedModel, base_id: str, theirs: tuple) -> str:
     """Why a model cannot step ``base_id``'s vehicle, with what would fix it."""
-    from quad_envs.vehicles import VEHICLES
+    from quad_envs.vehicles import vehicles_with
 
     head = (f"model variables {model.state_names} / {model.input_names} do not match "
             f"{base_id}'s {theirs[0]} / {theirs[1]}")  # fmt: skip
     if not model.input_names:
         return head + ": the model has no inputs, and a surrogate env steps with actions"
-    for name, vehicle in VEHICLES.items():
-        if {*vehicle.state_names, *vehicle.input_names} == {*model.state_names, *model.input_names}:
-            return head + f": it is a model of the {name} vehicle; use that vehicle's env"
+    owner = next(iter(vehicles_with(model.state_names, model.input_names)), None)
+    if owner is not None:
+        return head + f": it is a model of the {owner} vehicle; use that vehicle's env"
     return head + (": a surrogate steps its vehicle's variables, so identify from a log with "
                    "those names (--columns renames a CSV's)")  # fmt: skip
 

@@ -284,14 +284,10 @@ def _looks_like_angle(name: str) -> bool:
 def _matching_vehicle(state_names: tuple[str, ...], input_names: tuple[str, ...]) -> str | None:
     """The registered vehicle with a library preset whose variables are exactly these."""
     from identification.libraries import PRESETS
+    from quad_envs.vehicles import vehicles_with
 
-    for name, vehicle in VEHICLES.items():  # in any column order (read in the preset's)
-        if name in PRESETS and (set(vehicle.state_names), set(vehicle.input_names)) == (
-            set(state_names),
-            set(input_names),
-        ):
-            return name
-    return None
+    # in any column order (the data are then read in the preset's)
+    return next((n for n in vehicles_with(state_names, input_names) if n in PRESETS), None)
 
 
 @app.command()
@@ -501,17 +497,14 @@ def score(
     cleaned as ``identify`` reads them, with the model's variables.
     """
     from identification.data import load_data
-    from identification.features import parse_term
     from identification.model import load_model
-    from identification.selection import TRIG_KINDS, data_warnings, held_out_errors
+    from identification.selection import data_warnings, held_out_errors, trig_variables
 
     if not (math.isfinite(seconds) and seconds > 0):
         _fail(f"--seconds must be a positive number, got {seconds:g}")
     try:
         loaded = load_model(model)
-        variables = set(loaded.state_names)
-        angles = sorted({f.var for n in loaded.feature_names for f in parse_term(n)
-                         if f.kind in TRIG_KINDS and f.var in variables})  # fmt: skip
+        angles = sorted(trig_variables(loaded.feature_names) & set(loaded.state_names))
         trajs, cleaning = load_data(
             data, states=loaded.state_names, inputs=loaded.input_names, time=time,
             angles=angles, measured=loaded.meta.get("measured_inputs", ()),

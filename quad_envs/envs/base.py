@@ -687,14 +687,8 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             # The observations still to return, oldest first: each step appends the new one
             # and returns (hands over) the oldest, so no observation is copied.
             self._pending = deque(obs.copy() for _ in range(self._delay))
-        # as the single env's reset info, member by member (a policy reading info acts at once)
-        states = self._states.copy()
-        zero_u = np.zeros((self.num_envs, self._m))
-        info = {"state": states[:, : self._n], "reference": refs, "action": zero_u,
-                "commanded": zero_u.copy(), "time": self._steps * self.dt}  # fmt: skip
-        if self._rotor_state:
-            info["rotor_thrusts"] = states[:, self._n :]
-        return obs, info
+        zero_u = np.zeros((self.num_envs, self._m))  # a policy reading info acts at once
+        return obs, self._info_all(refs, zero_u, zero_u.copy())
 
     def _reset_members(self, rows: np.ndarray, state: Any = None, spec: Any = None) -> None:
         """Starts new episodes of the members in rows: each draws from its own generator.
@@ -802,18 +796,23 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             self._pending.append(obs)
             obs = self._pending.popleft()
         self._needs_reset = terminated | truncated
-        states = self._states.copy()  # one copy; the info holds views of it
+        info = self._info_all(refs, u, u_cmd)
+        info["out_of_bounds"] = terminated.copy()  # as the single env's step info
+        return obs, reward, terminated, truncated, info
+
+    def _info_all(self, refs: FloatArray, u: FloatArray, u_cmd: FloatArray) -> dict[str, Any]:
+        """The single env's info, member by member (one copy of the states; views of it)."""
+        states = self._states.copy()
         info = {
             "state": states[:, : self._n],
             "reference": refs,
             "action": u,
             "commanded": u_cmd,
             "time": self._steps * self.dt,
-            "out_of_bounds": terminated.copy(),  # as the single env's step info
         }
         if self._rotor_state:
             info["rotor_thrusts"] = states[:, self._n :]
-        return obs, reward, terminated, truncated, info
+        return info
 
     def render(self) -> FloatArray | None:
         """Draws member 0 (``rgb_array``)."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from quad_envs.vehicles.base import Controller, Vehicle, View
 from quad_envs.vehicles.crazyflie_motors import CRAZYFLIE_MOTORS
 from quad_envs.vehicles.planar import PLANAR
@@ -21,6 +23,13 @@ def get_vehicle(name: str) -> Vehicle:
         ) from None
 
 
+def vehicles_with(state_names: Sequence[str], input_names: Sequence[str]) -> list[str]:
+    """The registered vehicles whose states and inputs are these, in any order."""
+    wanted = (set(state_names), set(input_names))
+    return [name for name, v in VEHICLES.items()
+            if (set(v.state_names), set(v.input_names)) == wanted]  # fmt: skip
+
+
 __all__ = [
     "CRAZYFLIE_MOTORS",
     "PLANAR",
@@ -30,4 +39,5 @@ __all__ = [
     "Vehicle",
     "View",
     "get_vehicle",
+    "vehicles_with",
 ]
