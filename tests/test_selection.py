@@ -1461,3 +1461,38 @@ def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean
     _, report = select_model(other_clean, lacking, **FAST)
     said = [w for w in report.warnings if "does not shrink with the integral window" in w]
     assert len(said) == 1 and said[0].startswith("the residual of z_dot' ("), said
+
+
+def test_centred_restart_replaces_a_support_built_around_a_cancelling_pair():
+    """Thrust and gravity: `u1` and `cos(a)` both far from zero, the target their difference.
+    A support that builds the difference from yaw-modulated columns (what the greedy path did
+    on a held-out 6-DOF trial) is replaced by the true pair; the true support, and exact
+    clean data (round-off residuals), are left alone."""
+    from identification.fit import Gram
+    from identification.selection import restart_centred
+
+    rng = np.random.default_rng(0)
+    n = 3000
+    t = np.arange(n) * 0.01
+    psi = 0.8 * np.sin(0.3 * t) + 0.5
+    c = np.cos(0.25 * np.sin(1.3 * t) * np.cos(0.7 * t))
+    u1 = 15 + 1.5 * np.sin(2.1 * t) + 0.3 * np.sin(5.3 * t)
+    cols = {"1": np.ones(n), "u1": u1, "cos(a)": c, "cos(b) u1": np.cos(psi) * u1,
+            "sin(b) u1": np.sin(psi) * u1, "cos(a) cos(b)": np.cos(psi) * c,
+            "cos(a) sin(b)": np.sin(psi) * c, "cos(b)": np.cos(psi),
+            "sin(b)": np.sin(psi)}  # fmt: skip
+    names = list(cols)
+    theta = np.column_stack(list(cols.values()))
+    exact = u1 / 1.5 - 9.81 * c
+    for noise in (1e-2, 0.0):
+        gram = Gram.from_rows(theta, (exact + noise * rng.normal(size=n))[:, None])
+        wrong = np.zeros((1, len(names)))
+        wrong[0, 3:9] = np.linalg.lstsq(theta[:, 3:9], exact, rcond=None)[0]
+        xi, notes = restart_centred(wrong, gram, np.ones(1), names, ["w"])
+        assert list(np.flatnonzero(xi[0])) == [1, 2], noise
+        np.testing.assert_allclose(xi[0, [1, 2]], [1 / 1.5, -9.81], rtol=1e-3)
+        assert "centred columns" in notes[0] and "in place of the path" in notes[0]
+        right = np.zeros((1, len(names)))
+        right[0, [1, 2]] = [1 / 1.5, -9.81]
+        same, notes = restart_centred(right, gram, np.ones(1), names, ["w"])
+        assert np.array_equal(same, right) and notes == []
