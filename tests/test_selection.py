@@ -1496,3 +1496,31 @@ def test_centred_restart_replaces_a_support_built_around_a_cancelling_pair():
         right[0, [1, 2]] = [1 / 1.5, -9.81]
         same, notes = restart_centred(right, gram, np.ones(1), names, ["w"])
         assert np.array_equal(same, right) and notes == []
+
+
+def test_exchange_and_add_replaces_a_stand_in_that_holds_two_true_terms(monkeypatch):
+    """`a` stands in for the true `b` and the small `c` together (the best single column, and
+    neither exchanging it for `b` nor adding `c` alone gains enough); one exchange plus one
+    addition reaches the exact pair. With the growth's pool cut to the chosen terms, only
+    that move can find it."""
+    import identification.selection as selection
+    from identification.fit import Gram
+
+    rng = np.random.default_rng(0)
+    n = 4000
+    b, c, hidden = rng.normal(size=(3, n))
+    c *= 0.3
+    theta = np.column_stack([b + c + 0.25 * hidden, b, c, rng.normal(size=(n, 8))])
+    names = ["a", "b", "c", *(f"n{k}" for k in range(8))]
+    gram = Gram.from_rows(theta, (b + c + 0.05 * rng.normal(size=n))[:, None])
+    unit = gram.r / gram.col_norms
+    free = np.ones(len(names), dtype=bool)
+    none = np.zeros((len(names), len(names)), dtype=bool)
+    assert selection.exchange_and_add(unit, gram.z[:, 0], [0], free, none)[1] == (1, 2)
+    monkeypatch.setattr(selection, "GROW_POOL", 0)
+    start = np.zeros((1, len(names)))
+    start[0, 0] = 1.0
+    xi, notes = selection.grow_significant(start, gram, np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(xi[0])) == [1, 2]
+    np.testing.assert_allclose(xi[0, [1, 2]], [1.0, 1.0], rtol=5e-3)
+    assert "holds 'b', 'c' in place of 'a'" in notes[0]
