@@ -24,7 +24,8 @@ from identification.surrogate import make_surrogate, register_surrogate
 
 
 @pytest.mark.parametrize(
-    "surrogate_id,system", zip(identification.SURROGATE_IDS, ["planar", "quad6dof"], strict=True)
+    "surrogate_id,system",
+    list(zip(identification.SURROGATE_IDS, ["planar", "quad6dof"], strict=True)),
 )
 def test_surrogate_ids_pass_check_env(tmp_path, surrogate_id, system):
     path = model_from_truth(system).save(tmp_path / "m.json")
