@@ -1197,9 +1197,9 @@ def select_model(
         "refitted on all data with the backward-elimination check; an equation replaced by a "
         "path on centred columns where that has no more terms and a penalised residual lower "
         "by the F-test's bar; each equation grown to its "
-        "best support one term larger among its terms' near twins and best next entries where "
-        "that passes the Bonferroni bar; terms that do not pass the bar against the "
-        "residuals' long-run variance dropped"
+        "best support one term larger among its terms' near twins and best next entries (or "
+        "one exchange plus one addition) where that passes the Bonferroni bar; terms that do "
+        "not pass the bar against the residuals' long-run variance dropped"
     )
     report = SelectionReport(candidates, chosen, k, horizon, rule)
     report.warnings += data_warnings(trajs, names)
