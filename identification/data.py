@@ -214,6 +214,19 @@ def _by_name(values: Any, names: tuple[str, ...] | None, what: str) -> Any:
     )
 
 
+def data_ranges(trajs: Sequence[Trajectory]) -> dict[str, list[float]]:
+    """Each state's and input's smallest and largest value over the data (stored in a model).
+
+    A model is tested by its selection only where its training data went: a held-out log that
+    leaves these ranges asks it to extrapolate (:func:`identification.selection.range_note`).
+    """
+    first = trajs[0]
+    values = np.vstack([np.hstack([t.x, t.u]) for t in trajs])
+    names = (*first.state_names, *first.input_names)
+    lows, highs = values.min(axis=0), values.max(axis=0)
+    return {n: [float(lo), float(hi)] for n, lo, hi in zip(names, lows, highs, strict=True)}
+
+
 def validate(traj: Trajectory) -> None:
     """Raises ValueError naming the problem: shapes, NaN/inf, time order, names."""
     t, x, u = traj.t, traj.x, traj.u

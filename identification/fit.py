@@ -47,7 +47,7 @@ from pysindy.optimizers import BaseOptimizer
 from sklearn.base import clone
 from threadpoolctl import threadpool_limits
 
-from identification.data import Trajectory
+from identification.data import Trajectory, data_ranges
 from identification.features import compile_features, compile_rhs, parse_term, term_name
 from identification.model import IdentifiedModel
 from identification.stepwise import simpler_twins, stepwise_coefficients
@@ -772,6 +772,7 @@ def fit(
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "conditioning": conditioning,
+        "ranges": data_ranges(trajs),
     }
     return IdentifiedModel(
         list(feature_names), xi, first.state_names, first.input_names, system, meta

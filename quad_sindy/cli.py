@@ -498,7 +498,12 @@ def score(
     """
     from identification.data import load_data
     from identification.model import load_model
-    from identification.selection import data_warnings, held_out_errors, trig_variables
+    from identification.selection import (
+        data_warnings,
+        held_out_errors,
+        range_note,
+        trig_variables,
+    )
 
     if not (math.isfinite(seconds) and seconds > 0):
         _fail(f"--seconds must be a positive number, got {seconds:g}")
@@ -526,8 +531,9 @@ def score(
         _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
     if cleaning.changed:
         typer.echo(f"data: {cleaning.summary()}")
-    for note in data_warnings(trajs, loaded.feature_names):
-        typer.echo(f"warning: {note}")
+    for note in [*data_warnings(trajs, loaded.feature_names), range_note(loaded, trajs)]:
+        if note:
+            typer.echo(f"warning: {note}")
     short = [t for t in trajs if len(t) <= steps]
     if short:
         typer.echo(f"note: {len(short)} of {len(trajs)} segment(s) ({sum(map(len, short))} rows) "

@@ -1524,3 +1524,24 @@ def test_exchange_and_add_replaces_a_stand_in_that_holds_two_true_terms(monkeypa
     assert list(np.flatnonzero(xi[0])) == [1, 2]
     np.testing.assert_allclose(xi[0, [1, 2]], [1.0, 1.0], rtol=5e-3)
     assert "holds 'b', 'c' in place of 'a'" in notes[0]
+
+
+def test_a_model_records_its_training_range_and_score_names_data_beyond_it(tmp_path, other_clean):
+    """Cross-validation tests a model only where its flights went; a held-out flight past
+    that (a trial: yaw beyond the training range, 17.5 % at 1 s) is named by ``score``."""
+    from identification.selection import range_note
+
+    model = fit(other_clean, planar_library(), FitConfig(lam=1e-3))
+    ranges = model.meta["ranges"]
+    stacked = np.vstack([np.hstack([t.x, t.u]) for t in other_clean])
+    for k, name in enumerate((*PS, *PI)):
+        assert ranges[name] == [stacked[:, k].min(), stacked[:, k].max()]
+    assert range_note(model, other_clean) == ""
+    wide = planar_flights(OTHER_PLANAR, FlightSpec(flights=1, steps=600, tilt=0.6, seed=5))
+    note = range_note(model, wide)
+    assert "phi to" in note and "y_dot" not in note.split("phi to")[0], note
+    path = str(write_trajectory_csv(tmp_path / "wide.csv", wide[0]))
+    model.save(tmp_path / "m.json")
+    shown = CliRunner().invoke(app, ["score", str(tmp_path / "m.json"), path])
+    assert shown.exit_code == 0 and "leave the model's training range: " in shown.output
+    assert load_model(tmp_path / "m.json").meta["ranges"] == ranges  # kept in the file
