@@ -135,6 +135,20 @@ class Trajectory:
             self.input_names, refs, dict(self.meta), missing, self.measured,
         )  # fmt: skip
 
+    def shift_inputs(self, rows: int, margin: int = 0) -> Trajectory:
+        """The trajectory with each row's inputs taken ``rows`` rows later (earlier if < 0).
+
+        For logs that record inputs late: with ``rows=1`` the input logged at row k + 1 acts
+        from row k. Rows without a shifted input (and ``margin`` rows at either end) go.
+        """
+        n = len(self)
+        lo, hi = max(margin, -rows), min(n - margin, n - rows)
+        if hi - lo < 2:
+            raise ValueError(f"a segment of {n} rows is too short to shift its inputs {rows} rows")
+        part = self.slice(lo, hi)
+        part.u = self.u[lo + rows : hi + rows].copy()
+        return part
+
     def stage_inputs(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The inputs at the start, middle and end of the steps that start at ``rows``.
 

@@ -1318,6 +1318,9 @@ def select_model(
     misfit = misfit_note(used, names, base.derivative, xi, outliers=named)
     if misfit:
         report.warnings.append(misfit)
+    shifted = input_shift_note(used, names, best.window, xi, ratio)
+    if shifted:
+        report.warnings.append(shifted)
     report.final_terms = int(np.count_nonzero(xi))
     tally = TALLY.summary()
     if tally:
@@ -1440,6 +1443,82 @@ def misfit_note(
         "variables may follow another convention (Z-Y-X angles, world-frame velocities), "
         + ("the outlying steps named above may cause it, " if outliers else "")
         + "or the states' noise is correlated in time (filtered estimates)"
+    )
+
+
+INPUT_SHIFTS = (-2, -1, 1, 2)
+"""Shifts of the inputs [rows] that :func:`input_shift_note` tries."""
+
+SHIFT_GAIN = 0.9
+"""A shift is named only where it leaves at most this share of an equation's residual."""
+
+
+def input_shift_note(
+    trajs: Sequence[Trajectory],
+    names: list[str],
+    window: int,
+    xi: np.ndarray,
+    ratio: np.ndarray,
+) -> str | None:
+    """A warning where the model's equations fit better with the inputs shifted a row or two.
+
+    A log that records each input a row late (a new-user trial: the 1-step delay of a
+    logger) is fitted with made-up damping and controller-shaped terms, and the model drifts
+    24 % of the roll range in 1 s; no other check named it. Each shift of
+    :data:`INPUT_SHIFTS` refits the model's own terms on the same rows (``max |shift|`` rows
+    cut at both ends of every segment) with the inputs taken that many rows later (or
+    earlier). A shift is named where, in an equation with an input term, it leaves at most
+    :data:`SHIFT_GAIN` of the residual and the drop passes the Bonferroni bar for the shifts
+    and equations tried (in residual variances, times the long-run ratio): on aligned data
+    every shift fits worse.
+    """
+    inputs = set(trajs[0].input_names)
+    variables = [*trajs[0].state_names, *trajs[0].input_names]
+    cols = sorted({int(j) for j in np.flatnonzero(np.any(xi != 0, axis=0))})
+    driven = [i for i in range(xi.shape[0])
+              if any(f.var in inputs for j in np.flatnonzero(xi[i])
+                     for f in parse_term(names[j], variables))]  # fmt: skip
+    margin = max(abs(d) for d in INPUT_SHIFTS)
+    usable = long_enough(trajs, window + 2 * margin + 2)
+    if not driven or not usable:
+        return None
+    sub = [names[j] for j in cols]
+    xs = xi[:, cols]
+    supports = {i: [k for k, j in enumerate(cols) if xi[i, j] != 0] for i in driven}
+
+    def residuals(shift: int) -> tuple[np.ndarray, np.ndarray]:
+        part = [t.shift_inputs(shift, margin) for t in usable]
+        g = Gram.stack(grams(part, sub, "rk4", window, xs))
+        pairs = [_residual_variance(g, i, supports[i]) for i in driven]
+        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+
+    rss0, _ = residuals(0)
+    bar = _significance_bar(len(INPUT_SHIFTS) * len(driven))
+    scale = np.maximum(ratio[driven], 1.0)
+    best: tuple[float, int, np.ndarray] | None = None
+    for shift in INPUT_SHIFTS:
+        rss, sigma2 = residuals(shift)
+        passes = (rss <= SHIFT_GAIN * rss0) & (rss0 - rss > bar * scale * sigma2)
+        if passes.any():
+            share = float(np.min(rss / np.maximum(rss0, 1e-300)))
+            if best is None or share < best[0]:
+                best = (share, shift, rss / np.maximum(rss0, 1e-300))
+    if best is None:
+        return None
+    _, shift, shares = best
+    states = trajs[0].state_names
+    listed = ", ".join(f"{states[i]}' x{share:.2g}" for i, share in zip(driven, shares, strict=True)
+                       if share <= SHIFT_GAIN)  # fmt: skip
+    cause = (
+        "the log may record the inputs late"
+        if shift > 0
+        else "the actuators may lag (a motor's time constant: the library lacks it), or the "
+        "log records the inputs early"
+    )
+    return (
+        f"the model's terms fit the data better with the inputs taken {abs(shift)} row(s) "
+        f"{'later' if shift > 0 else 'earlier'} (residual {listed}): {cause}; identify again "
+        f"with --input-shift {shift} if the log is off"
     )
 
 

@@ -335,6 +335,15 @@ def identify(
             "reported"
         ),
     ] = False,
+    input_shift: Annotated[
+        int,
+        typer.Option(
+            help="take each row's inputs this many rows later (a log that records inputs a "
+            "row late: 1; earlier if negative)",
+            min=-100,
+            max=100,
+        ),
+    ] = 0,
     plot: Annotated[Path | None, typer.Option(help="selection plot (default: OUT.png)")] = None,
 ) -> None:
     """Identifies a SINDy-with-control model from data alone and prints its equations.
@@ -391,6 +400,11 @@ def identify(
                 first = trajs[0]
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")
+        if input_shift:
+            trajs = [t.shift_inputs(input_shift) for t in trajs]
+            first = trajs[0]
+            typer.echo(f"data: inputs taken {abs(input_shift)} row(s) "
+                       f"{'later' if input_shift > 0 else 'earlier'} (--input-shift)")  # fmt: skip
         if method == "paper":
             from identification.experiments.paper import PAPER_LAMBDA, fit_paper
 
@@ -474,6 +488,8 @@ def identify(
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
     model.meta["data"] = {**dataclasses.asdict(cleaning), "summary": cleaning.summary()}
+    if input_shift:
+        model.meta["input_shift"] = input_shift
     model.save(out)
     typer.echo("\n".join(model.equations()))
     typer.echo(f"wrote {out}")
@@ -515,6 +531,11 @@ def score(
             angles=angles, measured=loaded.meta.get("measured_inputs", ()),
             time_unit=SECONDS_PER[time_unit.value],
         )  # fmt: skip
+        shift = int(loaded.meta.get("input_shift", 0))
+        if shift:  # the logs are read as the model's training logs were
+            trajs = [t.shift_inputs(shift) for t in trajs]
+            when = "later" if shift > 0 else "earlier"
+            typer.echo(f"data: inputs taken {abs(shift)} row(s) {when}, as in training")
         periods = sorted(t.dt for t in trajs)
         if periods[-1] > 1.01 * periods[0]:  # one horizon in steps must be one in seconds
             _fail(f"the logs' sample steps differ ({periods[0]:g} s to {periods[-1]:g} s): "

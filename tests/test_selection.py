@@ -1545,3 +1545,27 @@ def test_a_model_records_its_training_range_and_score_names_data_beyond_it(tmp_p
     shown = CliRunner().invoke(app, ["score", str(tmp_path / "m.json"), path])
     assert shown.exit_code == 0 and "leave the model's training range: " in shown.output
     assert load_model(tmp_path / "m.json").meta["ranges"] == ranges  # kept in the file
+
+
+def test_inputs_logged_a_row_late_are_named_and_input_shift_undoes_them(tmp_path, other_clean):
+    """A logger that records each input a row late (a new-user trial: made-up damping terms,
+    24 % of the roll range at 1 s, no warning) is named; ``--input-shift 1`` gives the exact
+    model back. Aligned data are not named."""
+    tr = other_clean[0]
+    shifted = tr.shift_inputs(2, margin=3)
+    np.testing.assert_array_equal(shifted.t, tr.t[3:-3])
+    np.testing.assert_array_equal(shifted.u, tr.u[5:-1])
+    np.testing.assert_array_equal(shifted.x, tr.x[3:-3])
+    late = [t.shift_inputs(-1) for t in other_clean]  # row k logs the input of row k - 1
+    _, report = select_model(late, planar_library(), **FAST)
+    assert any("inputs taken 1 row(s) later" in w for w in report.warnings), report.warnings
+    _, report = select_model(other_clean, planar_library(), **FAST)
+    assert not any("inputs taken" in w for w in report.warnings), report.warnings
+    paths = [str(write_trajectory_csv(tmp_path / f"late{i}.csv", t)) for i, t in enumerate(late)]
+    out = tmp_path / "m.json"
+    run = CliRunner().invoke(app, ["identify", *paths, "--input-shift", "1", "--out", str(out)])
+    assert run.exit_code == 0, run.output
+    model = load_model(out)
+    check = check_support(model, truth_planar(OTHER_PLANAR))
+    assert check.exact_support and check.max_rel_error < 1e-6, check
+    assert model.meta["input_shift"] == 1 and "fit the data better" not in run.output
