@@ -139,14 +139,16 @@ class Trajectory:
         """The trajectory with each row's inputs taken ``rows`` rows later (earlier if < 0).
 
         For logs that record inputs late: with ``rows=1`` the input logged at row k + 1 acts
-        from row k. Rows without a shifted input (and ``margin`` rows at either end) go.
+        from row k. Rows without a shifted input (and ``margin`` rows at either end) go; the
+        total shift from the log is kept in ``meta["input_shift"]``.
         """
         n = len(self)
         lo, hi = max(margin, -rows), min(n - margin, n - rows)
-        if hi - lo < 2:
+        if hi - lo < 3:
             raise ValueError(f"a segment of {n} rows is too short to shift its inputs {rows} rows")
         part = self.slice(lo, hi)
         part.u = self.u[lo + rows : hi + rows].copy()
+        part.meta["input_shift"] = int(self.meta.get("input_shift", 0)) + rows
         return part
 
     def stage_inputs(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -460,8 +460,19 @@ def held_out_errors(
 RANGE_MARGIN = 0.05
 """A held-out value counts as outside the training range past this share of its span."""
 
-RANGE_ROWS = 0.01
+RANGE_ROWS = 0.05
 """A variable is named when at least this share of the rows lie outside its range."""
+
+
+def _is_range(bounds: Any) -> bool:
+    """``[low, high]``: two finite numbers in order."""
+    return (
+        isinstance(bounds, list | tuple)
+        and len(bounds) == 2
+        and all(isinstance(b, int | float) and not isinstance(b, bool) for b in bounds)
+        and bool(np.all(np.isfinite(bounds)))
+        and bounds[0] <= bounds[1]
+    )
 
 
 def range_note(model: IdentifiedModel, trajs: Sequence[Trajectory]) -> str:
@@ -480,9 +491,10 @@ def range_note(model: IdentifiedModel, trajs: Sequence[Trajectory]) -> str:
     values = np.vstack([np.hstack([t.x, t.u]) for t in trajs]) if trajs else np.zeros((0, 0))
     out = []
     for k, name in enumerate(names):
-        if name not in ranges or name not in used or not len(values):
-            continue  # a position no term uses may be anywhere
-        lo, hi = ranges[name]
+        bounds = ranges.get(name) if isinstance(ranges, dict) else None
+        if name not in used or not len(values) or not _is_range(bounds):
+            continue  # a position no term uses may be anywhere; a damaged entry says nothing
+        lo, hi = float(bounds[0]), float(bounds[1])
         margin = RANGE_MARGIN * max(hi - lo, 1e-12)
         column = values[:, k]
         outside = (column < lo - margin) | (column > hi + margin)
@@ -493,9 +505,8 @@ def range_note(model: IdentifiedModel, trajs: Sequence[Trajectory]) -> str:
     if not out:
         return ""
     return (
-        f"the data leave the model's training range: {'; '.join(out)}. There the model "
-        "extrapolates what its selection never tested, and its errors can be larger than the "
-        "selection's scores"
+        f"the data leave the model's training range: {'; '.join(out)}. The selection tested "
+        "the model only within that range: its errors there can be larger than its scores"
     )
 
 
@@ -1297,6 +1308,9 @@ def select_model(
         report.warnings = [w for w in report.warnings if not w.startswith(stale)]
     if not np.any(xi):
         raise ValueError(_empty_model_message(candidates, report.hold))
+    shifted = input_shift_note(used, names, best.window, xi, ratio)
+    if shifted:  # before the notes it causes (outlying steps, misfit)
+        report.warnings.append(shifted)
     if base.derivative in ("rk4", "forward"):
         # The returned model's own residuals: sparse, it cannot bend to bad steps as a fit of
         # the whole library does (4 % of the steps with a wrong input hid from such a fit).
@@ -1318,9 +1332,6 @@ def select_model(
     misfit = misfit_note(used, names, base.derivative, xi, outliers=named)
     if misfit:
         report.warnings.append(misfit)
-    shifted = input_shift_note(used, names, best.window, xi, ratio)
-    if shifted:
-        report.warnings.append(shifted)
     report.final_terms = int(np.count_nonzero(xi))
     tally = TALLY.summary()
     if tally:
@@ -1446,7 +1457,7 @@ def misfit_note(
     )
 
 
-INPUT_SHIFTS = (-2, -1, 1, 2)
+INPUT_SHIFTS = (-3, -2, -1, 1, 2, 3)
 """Shifts of the inputs [rows] that :func:`input_shift_note` tries."""
 
 SHIFT_GAIN = 0.9
@@ -1494,7 +1505,7 @@ def input_shift_note(
 
     rss0, _ = residuals(0)
     bar = _significance_bar(len(INPUT_SHIFTS) * len(driven))
-    scale = np.maximum(ratio[driven], 1.0)
+    scale = np.maximum(np.asarray(ratio, dtype=float)[driven], 1.0)
     best: tuple[float, int, np.ndarray] | None = None
     for shift in INPUT_SHIFTS:
         rss, sigma2 = residuals(shift)
@@ -1507,8 +1518,10 @@ def input_shift_note(
         return None
     _, shift, shares = best
     states = trajs[0].state_names
-    listed = ", ".join(f"{states[i]}' x{share:.2g}" for i, share in zip(driven, shares, strict=True)
-                       if share <= SHIFT_GAIN)  # fmt: skip
+    pairs = [(states[i], share) for i, share in zip(driven, shares, strict=True)]
+    listed = ", ".join(f"{s}' to {100 * r:.2g} %" for s, r in pairs if r <= SHIFT_GAIN)
+    applied = int(trajs[0].meta.get("input_shift", 0))  # already shifted by --input-shift
+    widest = max(INPUT_SHIFTS)
     cause = (
         "the log may record the inputs late"
         if shift > 0
@@ -1517,8 +1530,9 @@ def input_shift_note(
     )
     return (
         f"the model's terms fit the data better with the inputs taken {abs(shift)} row(s) "
-        f"{'later' if shift > 0 else 'earlier'} (residual {listed}): {cause}; identify again "
-        f"with --input-shift {shift} if the log is off"
+        f"{'later' if shift > 0 else 'earlier'} (residual {listed}; shifts up to {widest} "
+        f"rows tried): {cause}; identify again with --input-shift {applied + shift} if the "
+        "log is off (the other warnings may be its symptoms)"
     )
 
 

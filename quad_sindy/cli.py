@@ -39,6 +39,16 @@ PresetName = Enum("PresetName", {name: name for name in ("planar", "quad6dof")},
 """The vehicles whose variable names and library ``identify`` knows."""
 
 
+def _shifted(trajs: list, rows: int) -> tuple[list, str]:
+    """The segments with their inputs shifted ``rows`` rows, and a note on those too short."""
+    kept = [t.shift_inputs(rows) for t in trajs if len(t) - abs(rows) >= 3]
+    if not kept:
+        _fail(f"every segment (the longest has {max(len(t) for t in trajs)} rows) is too short "
+              f"to shift its inputs {rows} rows")  # fmt: skip
+    short = len(trajs) - len(kept)
+    return kept, (f"; {short} segment(s) too short for the shift left out" if short else "")
+
+
 def _fail(message: str) -> None:
     typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
     raise typer.Exit(2)
@@ -356,7 +366,13 @@ def identify(
     from identification.data import PRESET_ANGLES, load_data
     from identification.fit import FitConfig, fit
     from identification.libraries import library_from_spec, spec_angles
-    from identification.selection import WINDOWS, data_warnings, select_model, typical_length
+    from identification.selection import (
+        WINDOWS,
+        data_warnings,
+        input_shift_note,
+        select_model,
+        typical_length,
+    )
 
     def split(text: str | None) -> list[str] | None:
         return [c.strip() for c in text.split(",") if c.strip()] if text else None
@@ -401,10 +417,11 @@ def identify(
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")
         if input_shift:
-            trajs = [t.shift_inputs(input_shift) for t in trajs]
+            trajs, dropped = _shifted(trajs, input_shift)
             first = trajs[0]
             typer.echo(f"data: inputs taken {abs(input_shift)} row(s) "
-                       f"{'later' if input_shift > 0 else 'earlier'} (--input-shift)")  # fmt: skip
+                       f"{'later' if input_shift > 0 else 'earlier'} (--input-shift)"
+                       + dropped)  # fmt: skip
         if method == "paper":
             from identification.experiments.paper import PAPER_LAMBDA, fit_paper
 
@@ -483,7 +500,13 @@ def identify(
                 model = fit(trajs, lib, config, label)
                 if library_note:
                     typer.echo(library_note)
-                for note in data_warnings(trajs, lib):  # select_model reports them itself
+                notes = data_warnings(trajs, lib)  # select_model reports them itself
+                if method in ("rk4", "forward"):
+                    ones = [1.0] * len(first.state_names)  # no long-run ratio: white residuals
+                    names = list(model.feature_names)
+                    xi = model.coefficients
+                    notes.append(input_shift_note(trajs, names, config.window, xi, ones))
+                for note in filter(None, notes):
                     typer.echo(f"warning: {note}")
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
@@ -531,11 +554,13 @@ def score(
             angles=angles, measured=loaded.meta.get("measured_inputs", ()),
             time_unit=SECONDS_PER[time_unit.value],
         )  # fmt: skip
-        shift = int(loaded.meta.get("input_shift", 0))
+        shift = loaded.meta.get("input_shift", 0)
+        if isinstance(shift, bool) or not isinstance(shift, int):
+            _fail(f"{model}: input_shift must be a whole number of rows, got {shift!r}")
         if shift:  # the logs are read as the model's training logs were
-            trajs = [t.shift_inputs(shift) for t in trajs]
+            trajs, dropped = _shifted(trajs, shift)
             when = "later" if shift > 0 else "earlier"
-            typer.echo(f"data: inputs taken {abs(shift)} row(s) {when}, as in training")
+            typer.echo(f"data: inputs taken {abs(shift)} row(s) {when}, as in training{dropped}")
         periods = sorted(t.dt for t in trajs)
         if periods[-1] > 1.01 * periods[0]:  # one horizon in steps must be one in seconds
             _fail(f"the logs' sample steps differ ({periods[0]:g} s to {periods[-1]:g} s): "

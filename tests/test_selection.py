@@ -1569,3 +1569,15 @@ def test_inputs_logged_a_row_late_are_named_and_input_shift_undoes_them(tmp_path
     check = check_support(model, truth_planar(OTHER_PLANAR))
     assert check.exact_support and check.max_rel_error < 1e-6, check
     assert model.meta["input_shift"] == 1 and "fit the data better" not in run.output
+    # the advice counts from the log, not from the shift already applied (a trial looped)
+    over = CliRunner().invoke(app, ["identify", *paths, "--input-shift", "2", "--out", str(out)])
+    assert "taken 1 row(s) earlier" in over.output and "--input-shift 1 " in over.output
+    # a fixed threshold is checked too
+    fixed = CliRunner().invoke(app, ["identify", *paths, "--lambda", "0.001", "--out", str(out)])
+    assert "--input-shift 1 " in fixed.output, fixed.output
+    # a segment too short for the shift is left out, not the whole run refused
+    from quad_sindy.cli import _shifted
+
+    kept, note = _shifted([late[0].slice(0, 4), *late], 2)
+    assert len(kept) == 3 and note == "; 1 segment(s) too short for the shift left out"
+    assert [len(k) for k in kept] == [len(t) - 2 for t in late]
