@@ -1293,10 +1293,11 @@ def select_model(
     report.warnings += [note for key, note in resolved.items() if key not in covered] + twins
     std = prob = None
     if n_models > 0:
-        xi, std, prob, dropped = _bootstrap(used, names, final_cfg, xi, n_models, seed,
-                                            grown, ratio)  # fmt: skip
+        xi, std, prob, held, dropped = _bootstrap(used, names, final_cfg, xi, n_models, seed,
+                                                  grown, ratio)  # fmt: skip
         report.warnings += dropped
-        report.warnings += _weak_terms_note(xi, std, prob, names, first.state_names)
+        # a term whose near twin the other bags hold is not unsettled (its twin note says so)
+        report.warnings += _weak_terms_note(xi, std, held, names, first.state_names)
     xi, note = _predicts_as_validated(xi, models[chosen], units, scale, horizon, resolution,
                                       names, first)  # fmt: skip
     if note:  # the checks' model is not returned: neither its notes nor statistics apply
@@ -1778,7 +1779,7 @@ def _bootstrap(
     seed: int,
     grown: dict[int, list[int]] | None = None,
     ratio: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """Block bootstrap of the chosen fit: spread, inclusion probability, E-SINDy thresholding.
 
     ``grown``: the supports :func:`grow_significant` chose ({equation: columns}), with
@@ -1786,6 +1787,12 @@ def _bootstrap(
     where its own rows pass the same bar (each added term past the Bonferroni bar, or a
     better fit at no more terms), so the inclusion probabilities describe the procedure that
     made the model.
+
+    Returns:
+        The coefficients (weak terms dropped), the spread, the inclusion probability, the
+        share of bags holding each term or a near twin in its place (for the weak-term
+        note: an exact `phi_dot` whose twin `cos(phi) phi_dot` half the bags held was named
+        unsettled beside the twin note), and the notes.
     """
     w = config.window
     n_blocks = 40 if len(names) < 100 else 12
@@ -1861,6 +1868,7 @@ def _bootstrap(
     # a zero: the bags chose between columns the data cannot tell apart.
     unit = full.r / np.maximum(full.col_norms, 1e-300)
     shown = bags_a.copy()
+    held = prob.copy()  # bags holding the term or, in its place, a near twin of it
     for i, j in zip(*np.nonzero((xi != 0) & (prob < 1.0)), strict=True):
         cos = unit.T @ unit[:, j]
         group = [k for k in np.flatnonzero(np.abs(cos) > 0.999) if k != j]
@@ -1870,6 +1878,7 @@ def _bootstrap(
         swapped = (bags_a[:, i, j] == 0) & (bags_a[:, i, group] != 0).any(axis=1)
         if swapped.any():
             shown[swapped, i, j] = bags_a[swapped][:, i, group] @ scale
+            held[i, j] += float(np.mean(swapped))
         if np.mean(swapped) >= 0.5:  # why a kept term's inclusion probability is low
             kept = [names[k] for k in group if np.any(bags_a[swapped, i, k] != 0)]
             notes.append(
@@ -1877,4 +1886,4 @@ def _bootstrap(
                 f"a near twin of {names[j]!r} in its place ({', '.join(map(repr, kept))}; "
                 "|cos| > 0.999 on this data); its spread is over that shared direction"
             )
-    return xi, bag_spread(shown, xi_in), prob, notes  # about the fit the bags resample
+    return xi, bag_spread(shown, xi_in), prob, held, notes  # about the fit the bags resample

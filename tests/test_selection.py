@@ -750,8 +750,10 @@ def test_bootstrap_keeps_a_term_whose_twin_stands_in_for_it_in_the_other_bags(mo
 
     monkeypatch.setattr(selection, "solve", bag)
     xi = np.array([[2.0, 0.0, 0.1, 0.0]])
-    kept, spread, prob, notes = selection._bootstrap([traj], names, FitConfig(window=1), xi, 9, 0)
+    kept, spread, prob, held, notes = selection._bootstrap([traj], names, FitConfig(window=1),
+                                                           xi, 9, 0)  # fmt: skip
     assert prob[0, 0] == pytest.approx(1 / 3) and prob[0, 2] == pytest.approx(1 / 3)
+    assert held[0, 0] == pytest.approx(1.0), "u1 or its twin in every bag: not weak"
     assert kept[0, 0] != 0, "u1 is carried by its twin in the other bags: kept"
     assert kept[0, 2] == 0 and any("'u2'" in n for n in notes), "u2 alone is weak: dropped"
     # u1's spread is over the shared direction (2.0 in every bag), not the 0-or-2 split
@@ -814,7 +816,7 @@ def test_bootstrap_keeps_a_weak_term_the_full_data_cannot_do_without(monkeypatch
 
     monkeypatch.setattr(selection, "solve", bag)
     xi = np.array([[0.0, 0.0, 0.5, 1e-3]])
-    kept, _, prob, notes = selection._bootstrap([traj], names, FitConfig(window=1), xi, 9, 0)
+    kept, _, prob, _, notes = selection._bootstrap([traj], names, FitConfig(window=1), xi, 9, 0)
     assert prob[0, 2] == pytest.approx(1 / 3) and prob[0, 3] == pytest.approx(1 / 3)
     assert kept[0, 2] == pytest.approx(0.5, rel=1e-6), "the data need u2: kept"
     assert kept[0, 3] == 0 and any("'phi'" in n for n in notes), "phi' does not need phi"
@@ -930,7 +932,7 @@ def test_bootstrap_drops_a_term_its_bags_spread_across_zero_unless_the_data_need
 
     monkeypatch.setattr(selection, "solve", bag)
     xi = np.array([[0.0, 0.0, 0.5, 1e-4]])
-    kept, std, prob, notes = selection._bootstrap([traj], names, FitConfig(window=1), xi, 10, 0)
+    kept, std, prob, _, notes = selection._bootstrap([traj], names, FitConfig(window=1), xi, 10, 0)
     assert prob[0, 2] == 1.0 and prob[0, 3] == 1.0
     assert abs(xi[0, 2]) < 2 * std[0, 2] and abs(xi[0, 3]) < 2 * std[0, 3]
     assert kept[0, 2] == pytest.approx(0.5, rel=1e-2), "the data need u2: kept"
