@@ -1471,6 +1471,7 @@ def input_shift_note(
     window: int,
     xi: np.ndarray,
     ratio: np.ndarray,
+    command: str = "identify again",
 ) -> str | None:
     """A warning where the model's equations fit better with the inputs shifted a row or two.
 
@@ -1532,7 +1533,7 @@ def input_shift_note(
     return (
         f"the model's terms fit the data better with the inputs taken {abs(shift)} row(s) "
         f"{'later' if shift > 0 else 'earlier'} (residual {listed}; shifts up to {widest} "
-        f"rows tried): {cause}; identify again with --input-shift {applied + shift} if the "
+        f"rows tried): {cause}; {command} with --input-shift {applied + shift} if the "
         "log is off (the other warnings may be its symptoms)"
     )
 

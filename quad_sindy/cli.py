@@ -527,6 +527,15 @@ def score(
     time_unit: Annotated[
         TimeUnit, typer.Option(help="unit of a numeric time column (timestamps are read as such)")
     ] = TimeUnit.s,
+    input_shift: Annotated[
+        int | None,
+        typer.Option(
+            help="take each row's inputs this many rows later (default: the model's own "
+            "--input-shift from identify)",
+            min=-100,
+            max=100,
+        ),
+    ] = None,
 ) -> None:
     """Predicts held-out logs open loop with their recorded inputs: error after --seconds.
 
@@ -540,6 +549,7 @@ def score(
     from identification.selection import (
         data_warnings,
         held_out_errors,
+        input_shift_note,
         range_note,
         trig_variables,
     )
@@ -554,7 +564,7 @@ def score(
             angles=angles, measured=loaded.meta.get("measured_inputs", ()),
             time_unit=SECONDS_PER[time_unit.value],
         )  # fmt: skip
-        shift = loaded.meta.get("input_shift", 0)
+        shift = loaded.meta.get("input_shift", 0) if input_shift is None else input_shift
         if isinstance(shift, bool) or not isinstance(shift, int):
             _fail(f"{model}: input_shift must be a whole number of rows, got {shift!r}")
         if shift:  # the logs are read as the model's training logs were
@@ -577,7 +587,12 @@ def score(
         _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
     if cleaning.changed:
         typer.echo(f"data: {cleaning.summary()}")
-    for note in [*data_warnings(trajs, loaded.feature_names), range_note(loaded, trajs)]:
+    window = loaded.meta.get("window", 1)
+    window = window if isinstance(window, int) and not isinstance(window, bool) else 1
+    ones = [1.0] * len(loaded.state_names)
+    late = input_shift_note(trajs, list(loaded.feature_names), max(window, 1),
+                            loaded.coefficients, ones, command="score again")  # fmt: skip
+    for note in [*data_warnings(trajs, loaded.feature_names), range_note(loaded, trajs), late]:
         if note:
             typer.echo(f"warning: {note}")
     short = [t for t in trajs if len(t) <= steps]

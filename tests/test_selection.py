@@ -1571,6 +1571,13 @@ def test_inputs_logged_a_row_late_are_named_and_input_shift_undoes_them(tmp_path
     check = check_support(model, truth_planar(OTHER_PLANAR))
     assert check.exact_support and check.max_rel_error < 1e-6, check
     assert model.meta["input_shift"] == 1 and "fit the data better" not in run.output
+    # score reads logs as the model was trained (its shift), and names aligned logs
+    aligned = [str(write_trajectory_csv(tmp_path / f"a{i}.csv", t))
+               for i, t in enumerate(other_clean)]  # fmt: skip
+    shown = CliRunner().invoke(app, ["score", str(out), *aligned])
+    assert "score again with --input-shift 0 " in shown.output, shown.output
+    shown = CliRunner().invoke(app, ["score", str(out), *aligned, "--input-shift", "0"])
+    assert shown.exit_code == 0 and "fit the data better" not in shown.output
     # the advice counts from the log, not from the shift already applied (a trial looped)
     over = CliRunner().invoke(app, ["identify", *paths, "--input-shift", "2", "--out", str(out)])
     assert "taken 1 row(s) earlier" in over.output and "--input-shift 1 " in over.output
