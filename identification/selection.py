@@ -1473,7 +1473,7 @@ def input_shift_note(
     ratio: np.ndarray,
     command: str = "identify again",
 ) -> str | None:
-    """A warning where the model's equations fit better with the inputs shifted a row or two.
+    """A warning where the model's equations fit better with the inputs shifted a few rows.
 
     A log that records each input a row late (a new-user trial: the 1-step delay of a
     logger) is fitted with made-up damping and controller-shaped terms, and the model drifts
