@@ -1590,3 +1590,28 @@ def test_inputs_logged_a_row_late_are_named_and_input_shift_undoes_them(tmp_path
     kept, note = _shifted([late[0].slice(0, 4), *late], 2)
     assert len(kept) == 3 and note == "; 1 segment(s) too short for the shift left out"
     assert [len(k) for k in kept] == [len(t) - 2 for t in late]
+
+
+def test_a_grown_term_that_fits_the_noise_bias_is_dropped_and_a_real_one_kept(other_clean):
+    """State noise biases a short window's fit (errors in variables): `sin(phi)` in `phi'`
+    took -0.077 at window 1 on 100 noisy flights and the growth kept it. Its coefficient
+    collapses at a wider window; a real term the growth added (`u2` in `phi_dot'`) keeps its."""
+    from identification.experiments.truth import truth_matrix
+    from identification.fit import Gram, grams
+    from identification.selection import _refit, drop_window_bias
+
+    noisy = add_noise(other_clean, 1e-2, seed=3)
+    names = planar_library()
+    path = truth_matrix(truth_planar(OTHER_PLANAR), PS, names)
+    gram = Gram.stack(grams(noisy, names, "rk4", 1, path))
+    phi, j = PS.index("phi"), names.index("sin(phi)")
+    grown = path.copy()
+    grown[phi] = _refit(gram, phi, [*np.flatnonzero(path[phi]), j])
+    assert grown[phi, j] < -0.01  # the bias at window 1
+    xi, notes = drop_window_bias(grown, path, gram, noisy, names, 4, PS, 1)
+    assert xi[phi, j] == 0 and "dropped 'sin(phi)', which the growth added" in notes[0]
+    rate, u2 = PS.index("phi_dot"), names.index("u2")
+    without = path.copy()
+    without[rate, u2] = 0.0
+    xi, notes = drop_window_bias(path, without, gram, noisy, names, 4, PS, 1)
+    assert xi[rate, u2] != 0 and notes == []
