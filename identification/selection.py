@@ -918,14 +918,9 @@ def grow_significant(
         scale = max(float(ratio[i]), 1.0)
         start = list(support)
         while True:
-            q = np.linalg.qr(a[:, support])[0]
-            resid = b - q @ (q.T @ b)
-            perp = a - q @ (q.T @ a)
-            p2 = np.einsum("ij,ij->j", perp, perp)
-            fit2 = (perp.T @ resid) ** 2 / np.maximum(p2, 1e-300)
-            gains = np.where(usable & (p2 > 1e-10), fit2, 0.0)
-            gains[support] = 0.0
-            top = [int(j) for j in np.argsort(gains)[::-1][:GROW_POOL] if gains[j] > 0]
+            outside = usable.copy()
+            outside[support] = False
+            top = _best_entries(a, b, support, outside, GROW_POOL)
             base = sorted({*support, *top})
             pool = sorted({*base, *np.flatnonzero(near[:, base].any(axis=1) & usable)})
             now = best_subset(g, c, pool, len(support), twin)
