@@ -127,6 +127,31 @@ class IdentifiedModel:
         """Number of non-zero coefficients."""
         return int(np.count_nonzero(self.coefficients))
 
+    def used_variables(self) -> set[str]:
+        """The states and inputs the model's non-zero terms read."""
+        names = (*self.state_names, *self.input_names)
+        terms = np.flatnonzero(np.any(self.coefficients != 0, axis=0))
+        return {f.var for j in terms for f in parse_term(self.feature_names[j], names)}
+
+    def training_box(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Lowest and highest value of each state and input the model was trained on.
+
+        From ``meta["ranges"]`` (:func:`identification.data.data_ranges`), over the states
+        then the inputs; a variable no term reads, or without a valid entry, is unbounded
+        (-inf, inf). None where the model has no ranges (files before 2026-11-26) or none
+        of them bounds a used variable.
+        """
+        ranges = self.meta.get("ranges")
+        if not isinstance(ranges, dict):
+            return None
+        names = (*self.state_names, *self.input_names)
+        used = self.used_variables()
+        low, high = np.full(len(names), -np.inf), np.full(len(names), np.inf)
+        for k, name in enumerate(names):
+            if name in used and _is_range(ranges.get(name)):
+                low[k], high[k] = ranges[name]
+        return (low, high) if np.isfinite(low).any() else None
+
     # -- text -------------------------------------------------------------------------
     def equations(
         self, precision: int = 4, latex: bool = False, uncertainty: bool = True
@@ -338,6 +363,17 @@ def load_model(path: str | Path) -> IdentifiedModel:
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: malformed JSON ({exc})") from None
     return IdentifiedModel.from_dict(data, source=str(path))
+
+
+def _is_range(bounds: Any) -> bool:
+    """``[low, high]``: two finite numbers in order (a damaged entry is not a range)."""
+    return (
+        isinstance(bounds, list | tuple)
+        and len(bounds) == 2
+        and all(isinstance(b, int | float) and not isinstance(b, bool) for b in bounds)
+        and bool(np.all(np.isfinite(bounds)))
+        and bounds[0] <= bounds[1]
+    )
 
 
 def _latex_number(value: float, digits: int) -> str:

@@ -464,17 +464,6 @@ RANGE_ROWS = 0.05
 """A variable is named when at least this share of the rows lie outside its range."""
 
 
-def _is_range(bounds: Any) -> bool:
-    """``[low, high]``: two finite numbers in order."""
-    return (
-        isinstance(bounds, list | tuple)
-        and len(bounds) == 2
-        and all(isinstance(b, int | float) and not isinstance(b, bool) for b in bounds)
-        and bool(np.all(np.isfinite(bounds)))
-        and bounds[0] <= bounds[1]
-    )
-
-
 def range_note(model: IdentifiedModel, trajs: Sequence[Trajectory]) -> str:
     """A warning naming the variables where ``trajs`` leave the model's training range.
 
@@ -484,23 +473,20 @@ def range_note(model: IdentifiedModel, trajs: Sequence[Trajectory]) -> str:
     only where :data:`RANGE_ROWS` of the rows or more lie past :data:`RANGE_MARGIN` of the
     span. Empty where none does or the model file has no ranges (files before 2026-11-26).
     """
-    ranges = model.meta.get("ranges") or {}
+    box = model.training_box()
+    if box is None or not trajs:
+        return ""
     names = (*model.state_names, *model.input_names)
-    used = {f.var for j in np.flatnonzero(np.any(model.coefficients != 0, axis=0))
-            for f in parse_term(model.feature_names[j], names)}  # fmt: skip
-    values = np.vstack([np.hstack([t.x, t.u]) for t in trajs]) if trajs else np.zeros((0, 0))
+    values = np.vstack([np.hstack([t.x, t.u]) for t in trajs])
     out = []
-    for k, name in enumerate(names):
-        bounds = ranges.get(name) if isinstance(ranges, dict) else None
-        if name not in used or not len(values) or not _is_range(bounds):
-            continue  # a position no term uses may be anywhere; a damaged entry says nothing
-        lo, hi = float(bounds[0]), float(bounds[1])
+    for k in np.flatnonzero(np.isfinite(box[0])):  # a variable no term reads may be anywhere
+        lo, hi = float(box[0][k]), float(box[1][k])
         margin = RANGE_MARGIN * max(hi - lo, 1e-12)
         column = values[:, k]
         outside = (column < lo - margin) | (column > hi + margin)
         if np.mean(outside) >= RANGE_ROWS:
             far = column[outside][np.argmax(np.abs(column[outside] - 0.5 * (lo + hi)))]
-            out.append(f"{name} to {far:.3g} (trained on {lo:.3g} to {hi:.3g}; "
+            out.append(f"{names[k]} to {far:.3g} (trained on {lo:.3g} to {hi:.3g}; "
                        f"{np.mean(outside):.1%} of the rows outside)")  # fmt: skip
     if not out:
         return ""

@@ -3,7 +3,9 @@
 A surrogate is the base environment class itself (same spaces, tasks, reward, termination,
 saturation and RK4) with the ground-truth vector field replaced by the model's compiled
 ``rhs``. States that leave the flight volume or become non-finite end the episode as
-``terminated`` with ``info["out_of_bounds"]`` set, and the observation stays finite.
+``terminated`` with ``info["out_of_bounds"]`` set, and the observation stays finite. Where the
+model file records its training range, each step's ``info["outside_training"]`` says how far
+the rollout went past it (in widths of the range; 0 inside): the model was tested only there.
 """
 
 from __future__ import annotations
@@ -169,6 +171,15 @@ def _warn_vehicle(model: IdentifiedModel, env: Any) -> None:
         warnings.warn(problem, RuntimeWarning, stacklevel=3)
 
 
+def _attach(model: IdentifiedModel, env: Any) -> None:
+    """Gives a surrogate env its model and its training range; warns of a vehicle mismatch."""
+    env.model = model
+    box = model.training_box()
+    if box is not None:
+        env.set_training_range(*box)
+    _warn_vehicle(model, env)
+
+
 def make_surrogate(
     model: IdentifiedModel | str | Path | None = None,
     base_id: str = "PlanarQuad-v0",
@@ -182,8 +193,7 @@ def make_surrogate(
     """
     model, cls = _resolve(model, base_id, vector=False)
     env = cls(rhs=surrogate_rhs(model, cls, compiled), **kwargs)
-    env.model = model
-    _warn_vehicle(model, env)
+    _attach(model, env)
     return env
 
 
@@ -197,8 +207,7 @@ def make_surrogate_vector(
     """A native vector surrogate env (the model compiled as in :func:`make_surrogate`)."""
     model, cls = _resolve(model, base_id, vector=True)
     env = cls(num_envs=num_envs, rhs=surrogate_rhs(model, cls, compiled), **kwargs)
-    env.model = model
-    _warn_vehicle(model, env)
+    _attach(model, env)
     return env
 
 
@@ -403,6 +412,9 @@ def make_ensemble_surrogate(
     member_rhs = _MemberRhs(models) if mode == "sample" else None
     env = cls(rhs=member_rhs if member_rhs is not None else median.rhs, **kwargs)
     env.model = median
+    box = median.training_box()
+    if box is not None:
+        env.set_training_range(*box)
     n = len(median.state_names)
     scale = np.ones(n) if scale is None else np.asarray(scale, dtype=np.float64)
     if scale.shape != (n,) or not (scale > 0).all():

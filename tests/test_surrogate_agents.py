@@ -72,6 +72,49 @@ def test_a_divergent_model_terminates_cleanly():
     assert term and info["out_of_bounds"] and rew == 0.0
 
 
+def test_surrogate_steps_say_how_far_they_leave_the_training_range():
+    """info["outside_training"] is the largest excursion past the model's recorded range, in
+    widths of it, over the variables its terms read (positions, read by none, are free)."""
+    truth = model_from_truth("planar")
+    ranges = {
+        "y": [0.0, 0.0],
+        "z": [0.0, 0.0],
+        "phi": [-0.02, 0.02],
+        "y_dot": [-1.0, 1.0],
+        "z_dot": [-1.0, 1.0],
+        "phi_dot": [-0.5, 0.5],
+        "u1": [0.0, 10.0],
+        "u2": [-1.0, 1.0],
+    }
+    model = dataclasses.replace(truth, meta={"ranges": ranges})
+    env = make_surrogate(model, "PlanarQuad-v0", trajectory="figure8")
+    venv = gym.make_vec("PlanarQuadSINDy-v0", num_envs=2, model=model, trajectory="figure8")
+    pd = PDPolicy(env)
+    obs, info = env.reset(seed=0)
+    venv.reset(seed=0)
+    widths = np.array([0.04, 2.0, 2.0, 1.0, 10.0, 2.0])  # phi .. u2
+    lows = np.array([-0.02, -1.0, -1.0, -0.5, 0.0, -1.0])
+    seen = []
+    for _ in range(200):
+        action = pd(obs, info)
+        obs, _, _, _, info = env.step(action)
+        _, _, _, _, vinfo = venv.step(np.stack([action, action]))
+        for state, u, flag in [
+            (info["state"], info["action"], info["outside_training"]),
+            *zip(vinfo["state"], vinfo["action"], vinfo["outside_training"], strict=True),
+        ]:
+            v = np.concatenate([state[2:], u])
+            expected = np.max(np.maximum(np.maximum(lows - v, v - lows - widths), 0.0) / widths)
+            assert flag == pytest.approx(expected, abs=1e-12)
+            seen.append(expected)
+    assert min(seen) == 0.0 and max(seen) > 0.5  # the figure eight tilts past 0.02 rad
+    truth_env = gym.make("PlanarQuad-v0")
+    truth_env.reset(seed=0)
+    assert "outside_training" not in truth_env.step(np.array([5.0, 0.0]))[4]
+    with pytest.raises(ValueError, match="training range needs 8"):
+        env.set_training_range(np.zeros(3), np.ones(3))
+
+
 def test_surrogate_rejects_mismatched_models():
     with pytest.raises(ValueError, match="do not match"):
         make_surrogate(model_from_truth("planar"), "Quad6DOF-v0")

@@ -179,6 +179,7 @@ class _EnvCore:
         self._n_ext = self._n + (self._k if self._rotor_state else 0)
         self.volume = config.volume
         self._custom_rhs = rhs
+        self._range: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._rhs: Rhs = rhs if rhs is not None else veh.rhs
         self._trajectory_spec = self._check_trajectory(config.trajectory)
         self._mix = np.ascontiguousarray(params.mixer, dtype=np.float64)
@@ -229,6 +230,34 @@ class _EnvCore:
         self._rest_of: tuple[Any, FloatArray] = (None, np.zeros(0))
         self._n_table = int(round(self.duration / self.dt)) + 1
         self._t_table = np.arange(self._n_table) * self.dt
+
+    def set_training_range(self, low: Any, high: Any) -> None:
+        """Adds ``info["outside_training"]`` to each step: how far it went past a range.
+
+        The value is the largest excursion of the state or the applied input beyond
+        ``[low, high]`` (states then inputs; +-inf leaves one unbounded), in widths of that
+        range; 0 inside.
+
+        A surrogate sets its model's training range (:meth:`IdentifiedModel.training_box`):
+        the model was tested only inside it, so a rollout with a large value leans on
+        extrapolation (truncate it, or trust its returns less).
+        """
+        low, high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
+        if low.shape != (self._n + self._m,) or high.shape != low.shape or np.any(low > high):
+            raise ValueError(
+                f"a training range needs {self._n + self._m} lows and highs (states then "
+                f"inputs) with low <= high, got {low.shape} and {high.shape}"
+            )
+        width = np.where(np.isfinite(high - low), np.maximum(high - low, 1e-12), np.inf)
+        self._range = (low, high, width)
+
+    def _outside(self, states: FloatArray, inputs: FloatArray) -> FloatArray:
+        """Per row, the largest excursion past the training range in its widths (0 inside)."""
+        low, high, width = self._range
+        v = np.concatenate([states, inputs], axis=-1)
+        with np.errstate(invalid="ignore"):
+            beyond = np.maximum(np.maximum(low - v, v - high), 0.0) / width
+        return np.max(np.nan_to_num(beyond, nan=np.inf), axis=-1)
 
     def _action_box(self, params: Any) -> tuple[FloatArray, FloatArray]:
         """The physical action box of the configured action mode."""
@@ -558,6 +587,8 @@ class QuadrotorEnv(_EnvCore, gym.Env):
                 self.render()
         info = self._info(ref, u[0], u_cmd[0])
         info["out_of_bounds"] = terminated
+        if self._range is not None:
+            info["outside_training"] = float(self._outside(info["state"], u[0]))
         return obs, float(reward[0]), terminated, False, info
 
     def _info(self, ref: FloatArray, u: FloatArray, u_cmd: FloatArray) -> dict[str, Any]:
@@ -798,6 +829,8 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
         self._needs_reset = terminated | truncated
         info = self._info_all(refs, u, u_cmd)
         info["out_of_bounds"] = terminated.copy()  # as the single env's step info
+        if self._range is not None:
+            info["outside_training"] = np.where(resetting, 0.0, self._outside(info["state"], u))
         return obs, reward, terminated, truncated, info
 
     def _info_all(self, refs: FloatArray, u: FloatArray, u_cmd: FloatArray) -> dict[str, Any]:
