@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,7 @@ from agents.parallel import run_jobs
 from agents.policies import OrnsteinUhlenbeckPolicy, SB3Policy
 from agents.tasks import task_kwargs
 from agents.train import ALGOS, canonical, evaluate, make_algo, train
-from identification.data import Trajectory
+from identification.data import IdentificationWarning, Trajectory
 from identification.fit import FitConfig, fit
 from identification.libraries import default_library
 from identification.model import IdentifiedModel
@@ -146,7 +147,9 @@ def identify(
     with ``config.ensemble > 1`` that configuration is refitted on bootstrap resamples of
     100-step segments (E-SINDy bagging), member 0 being the selected model itself.
     """
-    model, _ = select_model(data, library, n_models=0, seed=seed)
+    with warnings.catch_warnings():  # refitted every iteration: the loop reports its scores
+        warnings.simplefilter("ignore", IdentificationWarning)
+        model, _ = select_model(data, library, n_models=0, seed=seed)
     models = [model]
     if config.ensemble == 1:
         return models

@@ -230,6 +230,17 @@ def _by_name(values: Any, names: tuple[str, ...] | None, what: str) -> Any:
     )
 
 
+class IdentificationWarning(UserWarning):
+    """What the data leave open about a model (a note of a selection report).
+
+    :func:`identification.selection.select_model` issues each note of ``report.warnings``
+    once as this warning.
+
+    Silence them with ``warnings.simplefilter("ignore", IdentificationWarning)``, or make them
+    errors in a pipeline that must not accept a doubtful model.
+    """
+
+
 def data_ranges(trajs: Sequence[Trajectory]) -> dict[str, list[float]]:
     """Each state's and input's smallest and largest value over the data (stored in a model).
 

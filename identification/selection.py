@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import warnings
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -67,7 +68,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.data import Trajectory, data_ranges
+from identification.data import IdentificationWarning, Trajectory, data_ranges
 from identification.features import compile_rhs, parse_term, term_name
 from identification.fit import (
     TALLY,
@@ -1158,7 +1159,8 @@ def select_model(
 
     Returns:
         The model (scores in ``meta["selection"]``, ensemble statistics attached) and the
-        report.
+        report. Each of the report's notes is also issued as an
+        :class:`identification.data.IdentificationWarning`.
 
     Raises:
         ValueError: Unidentifiable data (see :func:`identification.fit.check_identifiable`),
@@ -1361,11 +1363,11 @@ def select_model(
             if kept:
                 done = (*_cut, *([outliers] if outliers else []),
                         outlier_note(trajs, flagged, True, lost))  # fmt: skip
-                return select_model(
+                return _warned(*select_model(
                     kept, names, config=config, lambdas=lambdas, windows=asked, folds=folds,
                     horizon=horizon_asked, n_models=n_models, seed=seed, system=system,
                     progress=progress, drop_outliers=False, _cut=done,
-                )  # fmt: skip
+                ))  # fmt: skip
         if flagged:
             note = outlier_note(trajs, flagged, False)
             report.warnings.append(f"after cutting, still: {note}" if _cut else note)
@@ -1388,6 +1390,18 @@ def select_model(
     }
     model = IdentifiedModel(names, xi, first.state_names, first.input_names, system, meta,
                             std, prob)  # fmt: skip
+    return (model, report) if _cut else _warned(model, report)
+
+
+def _warned(
+    model: IdentifiedModel, report: SelectionReport
+) -> tuple[IdentifiedModel, SelectionReport]:
+    """Issues each of the report's notes as an :class:`IdentificationWarning`.
+
+    API users see them without reading ``report.warnings``; the CLI prints the list instead.
+    """
+    for note in report.warnings:
+        warnings.warn(note, IdentificationWarning, stacklevel=4)  # past serial_blas
     return model, report
 
 

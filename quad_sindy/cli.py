@@ -1044,7 +1044,11 @@ def main() -> None:
 
     import gymnasium as gym
 
+    from identification.data import IdentificationWarning
+
     warnings.showwarning = _one_line_warning
+    # The commands print a selection's notes themselves ("warning: ..."), once.
+    warnings.simplefilter("ignore", IdentificationWarning)
     try:
         app()
     except (*USER_ERRORS, gym.error.Error) as exc:

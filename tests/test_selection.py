@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from identification.data import Trajectory, clean, load_data, write_trajectory_csv
+from identification.data import (
+    IdentificationWarning,
+    Trajectory,
+    clean,
+    load_data,
+    write_trajectory_csv,
+)
 from identification.experiments.synthetic import (
     OTHER_PLANAR,
     FlightSpec,
@@ -1303,8 +1309,13 @@ def test_the_python_api_refuses_or_flags_what_the_cli_does(other_clean, tmp_path
     # degrees and milliseconds are flagged in the report, as the CLI flags them
     degrees = [Trajectory(t.t, np.column_stack([t.x[:, :2], np.degrees(t.x[:, 2]), t.x[:, 3:]]),
                           t.u, PS, PI) for t in other_clean]  # fmt: skip
-    _, report = select_model(degrees, planar_library(), windows=(1,), n_models=0)
+    with pytest.warns(IdentificationWarning) as issued:
+        _, report = select_model(degrees, planar_library(), windows=(1,), n_models=0)
     assert any(w.startswith("phi reaches") and "radians" in w for w in report.warnings)
+    # API users get the notes as Python warnings, once each, pointing at their own call
+    ours = [w for w in issued if w.category is IdentificationWarning]
+    assert [str(w.message) for w in ours] == report.warnings
+    assert {w.filename for w in ours} == {__file__}
     wrapped = []
     for t in other_clean:  # flown about phi = 3.1 rad and logged wrapped into (-pi, pi]
         x = t.x.copy()
@@ -1373,8 +1384,12 @@ def test_steps_where_inputs_did_not_act_as_logged_are_reported_and_cut_on_reques
     with pytest.raises(ValueError, match="drop_outliers works with the rk4 and forward"):
         select_model(logged, planar_library(), config=FitConfig(derivative="central"),
                      drop_outliers=True)  # fmt: skip
-    model, report = select_model(logged, planar_library(), n_models=0, drop_outliers=True)
+    with pytest.warns(IdentificationWarning) as issued:  # the second selection's, once
+        model, report = select_model(logged, planar_library(), n_models=0, drop_outliers=True)
     assert any(w.startswith("cut out before selecting: ") for w in report.warnings)
+    assert [str(w.message) for w in issued if w.category is IdentificationWarning] == (
+        report.warnings
+    )
     truth = truth_planar(PlanarQuadParams(mass=0.5, Ixx=3e-3))
     assert check_support(model, truth).exact_support
     # a wrong thrust on every 25th step (4 %): a fit of the whole library bends to them and
