@@ -32,6 +32,7 @@ import quad_envs
 
 _EXPORTS = {
     "Trajectory": "identification.data",
+    "IdentificationWarning": "identification.data",
     "clean": "identification.data",
     "load_data": "identification.data",
     "FitConfig": "identification.fit",
