@@ -137,9 +137,12 @@ class IdentifiedModel:
         """Lowest and highest value of each state and input the model was trained on.
 
         From ``meta["ranges"]`` (:func:`identification.data.data_ranges`), over the states
-        then the inputs; a variable no term reads, or without a valid entry, is unbounded
-        (-inf, inf). None where the model has no ranges (files before 2026-11-26) or none
-        of them bounds a used variable.
+        then the inputs. A state no term reads (a position) is unbounded (-inf, inf); every
+        input is bounded, read or not: a model without an input's terms claims it has no
+        effect, which its data tested only over their range (a closed-loop trial's
+        ``y_dot' = -9.8 sin(phi)``, the thrust's twin at hover thrust, drifted 3 % in 1 s on
+        flights that left it). A variable without a valid entry is unbounded. None where the
+        model has no ranges (files before 2026-11-26) or none of them bounds a variable.
         """
         ranges = self.meta.get("ranges")
         if not isinstance(ranges, dict):
@@ -148,7 +151,7 @@ class IdentifiedModel:
         used = self.used_variables()
         low, high = np.full(len(names), -np.inf), np.full(len(names), np.inf)
         for k, name in enumerate(names):
-            if name in used and _is_range(ranges.get(name)):
+            if (name in used or k >= len(self.state_names)) and _is_range(ranges.get(name)):
                 low[k], high[k] = ranges[name]
         return (low, high) if np.isfinite(low).any() else None
 

@@ -502,9 +502,10 @@ def range_note(model: IdentifiedModel, trajs: Sequence[Trajectory]) -> str:
 
     The selection scores a model only on what its training flights span; a trial's 6-DOF
     model, right where its flights went, drifted 17.5 % in 1 s on a held-out flight whose
-    yaw went past the training range. Only variables the model's terms use are checked, and
-    only where :data:`RANGE_ROWS` of the rows or more lie past :data:`RANGE_MARGIN` of the
-    span. Empty where none does or the model file has no ranges (files before 2026-11-26).
+    yaw went past the training range. The inputs and the states the model's terms use are
+    checked (:meth:`IdentifiedModel.training_box`), each where :data:`RANGE_ROWS` of the
+    rows or more lie past :data:`RANGE_MARGIN` of the span. Empty where none does or the
+    model file has no ranges (files before 2026-11-26).
     """
     box = model.training_box()
     if box is None or not trajs:
@@ -512,7 +513,7 @@ def range_note(model: IdentifiedModel, trajs: Sequence[Trajectory]) -> str:
     names = (*model.state_names, *model.input_names)
     values = np.vstack([np.hstack([t.x, t.u]) for t in trajs])
     out = []
-    for k in np.flatnonzero(np.isfinite(box[0])):  # a variable no term reads may be anywhere
+    for k in np.flatnonzero(np.isfinite(box[0])):  # a position no term reads may be anywhere
         lo, hi = float(box[0][k]), float(box[1][k])
         margin = RANGE_MARGIN * max(hi - lo, 1e-12)
         column = values[:, k]

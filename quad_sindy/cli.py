@@ -609,6 +609,10 @@ def score(
         f"score ({steps}-step prediction error over each state's scale, as identify's "
         f"selection): {result.score:.3g}; holding the state: {result.hold:.3g}"
     )
+    if result.score >= result.hold:
+        typer.echo(f"warning: the model predicts these logs no better than holding the "
+                   f"state ({result.score:.3g} against {result.hold:.3g}): it does not hold "
+                   "here")  # fmt: skip
     if result.diverged:
         typer.echo(f"warning: the prediction diverged from {result.diverged} of "
                    f"{result.starts} starts (left out of the errors above)")  # fmt: skip
@@ -1095,3 +1099,7 @@ def benchmark_nanodrone(
         )
         typer.echo(f"beats every published model {label}: {verdict}")
     typer.echo(f"wrote {out}/report.md, metrics.json, model.json and figures")
+
+
+if __name__ == "__main__":  # ``python -m quad_sindy.cli`` as ``python -m quad_sindy``
+    main()

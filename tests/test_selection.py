@@ -1,5 +1,6 @@
 """Truth-free selection on vehicles that are not the paper's, refusal of unidentifiable data."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -1561,7 +1562,18 @@ def test_a_model_records_its_training_range_and_score_names_data_beyond_it(tmp_p
     model.save(tmp_path / "m.json")
     shown = CliRunner().invoke(app, ["score", str(tmp_path / "m.json"), path])
     assert shown.exit_code == 0 and "leave the model's training range: " in shown.output
+    assert "no better than holding the state" not in shown.output
     assert load_model(tmp_path / "m.json").meta["ranges"] == ranges  # kept in the file
+    # an input no term reads is checked too: the model claims it has no effect
+    thrust = np.array([["u1" in f for f in model.feature_names]])
+    no_thrust = dataclasses.replace(model, coefficients=np.where(thrust, 0.0, model.coefficients))
+    heavier = [Trajectory(t.t, t.x, t.u * [1.5, 1.0], PS, PI) for t in other_clean]
+    assert "u1 to" in range_note(no_thrust, heavier) and "phi" not in range_note(no_thrust, heavier)
+    assert range_note(no_thrust, other_clean) == ""
+    # a model that predicts worse than holding the state is told so
+    dataclasses.replace(model, coefficients=-model.coefficients).save(tmp_path / "bad.json")
+    shown = CliRunner().invoke(app, ["score", str(tmp_path / "bad.json"), path])
+    assert shown.exit_code == 0 and "no better than holding the state" in shown.output
 
 
 def test_inputs_logged_a_row_late_are_named_and_input_shift_undoes_them(tmp_path, other_clean):
