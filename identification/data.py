@@ -241,6 +241,31 @@ class IdentificationWarning(UserWarning):
     """
 
 
+def logged_resolution(values: np.ndarray) -> float:
+    """The step a logged signal was recorded in: a decimal place, float32 or float64.
+
+    Rounded to k decimals (0 to 12), the step is 10^-k; stored as float32 (or float32 values
+    printed to k decimals), the float32 spacing at its largest magnitude where that is larger;
+    otherwise the float64 spacing there.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    big = float(np.abs(v).max()) if v.size else 0.0
+    if not big:
+        return float(np.spacing(1.0))
+    single = float(np.spacing(np.float32(big)))
+    step = float(np.spacing(big))
+    for k in range(13):
+        scaled = v * 10.0**k
+        if np.max(np.abs(scaled - np.round(scaled))) <= 1e-6 + 4 * np.spacing(big * 10.0**k):
+            step = 10.0**-k
+            break
+    # float32 values, printed to k decimals or not, sit within half a step of a float32
+    if np.max(np.abs(v - v.astype(np.float32))) <= 0.5 * step + 4 * np.spacing(big):
+        return max(step, single)
+    return step
+
+
 def data_ranges(trajs: Sequence[Trajectory]) -> dict[str, list[float]]:
     """Each state's and input's smallest and largest value over the data (stored in a model).
 

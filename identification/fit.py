@@ -28,8 +28,9 @@ one threshold ``lam`` means the same for every term. After selection the support
 by least squares (debiasing).
 
 Before any fit, :func:`check_identifiable` refuses data on which the library cannot be
-identified (too few rows, a constant input, exactly collinear or all-zero columns) with a
-one-line ValueError that names the terms and the data that would fix it.
+identified (too few rows, a constant input, exactly collinear or all-zero columns, an input
+that follows the states to its logging resolution) with a one-line ValueError that names the
+terms and the data that would fix it.
 """
 
 from __future__ import annotations
@@ -465,17 +466,129 @@ def check_identifiable(
             f"term(s) {zero[:6]} are zero on all data: record data in which they vary, or "
             "remove them from the library"
         )
-    _, sing, vt = np.linalg.svd(gram.r / norm, full_matrices=False)
+    unit = gram.r / norm
+    _, sing, vt = np.linalg.svd(unit, full_matrices=False)
     ratio = sing[-1] / sing[0]
     if ratio < tol:
-        vec = vt[-1]
-        involved = [names[j] for j in np.argsort(-np.abs(vec)) if abs(vec[j]) > 0.05][:6]
-        raise ValueError(
-            f"terms {involved} are exactly collinear on this data (a combination of them is "
-            f"zero to {ratio:.0e} of the largest): record data in which they vary "
-            "independently (other inputs, larger angles), or remove all but one of them"
-        )
+        raise ValueError(_collinear_message(unit, norm, vt[-1],
+                                            int(np.sum(sing < tol * sing[0])), ratio, names,
+                                            trajs))  # fmt: skip
+    if trajs:
+        feedback = _feedback(unit, norm, names, trajs)
+        if feedback:
+            raise ValueError(feedback)
     return {"condition": float(1.0 / ratio)}
+
+
+def _relation(
+    unit: np.ndarray, norm: np.ndarray, names: Sequence[str], j: int, among: Sequence[int]
+) -> str:
+    """``names[j]`` as the least-squares combination of the columns ``among``, in data units
+    (its 5 largest parts by contribution): the law an input follows, where it is feedback."""
+    among = list(among)
+    coef = np.linalg.lstsq(unit[:, among], unit[:, j], rcond=None)[0]
+    order = [k for k in np.argsort(-np.abs(coef)) if abs(coef[k]) > 1e-3 * np.abs(coef).max()]
+    data = coef * norm[j] / norm[among]
+    terms = " ".join(f"{'-' if data[k] < 0 else '+'} {abs(data[k]):.4g}"
+                     + ("" if names[among[k]] == "1" else f" {names[among[k]]}")
+                     for k in order[:5])  # fmt: skip
+    return f"{names[j]} = {terms.removeprefix('+ ')}{' ...' if len(order) > 5 else ''}"
+
+
+def _collinear_message(
+    unit: np.ndarray,
+    norm: np.ndarray,
+    null: np.ndarray,
+    dimension: int,
+    ratio: float,
+    names: Sequence[str],
+    trajs: Sequence[Trajectory] | None,
+) -> str:
+    """Why the library is singular on the data: the simplest exact relation, with a fix.
+
+    In library order (simplest terms first), the first column that the earlier ones give to
+    round-off is named with them; a null vector's largest entries, where a null space has
+    several dimensions, mixed relations (regulation flights: ``u1``, ``cos(phi)``, ``1`` and
+    ``cos(phi) u1`` were named, the exact set is ``1, z, z_dot, u1``, the controller's law).
+    """
+    diag = np.abs(np.diag(unit))
+    first = np.flatnonzero(diag < np.sqrt(SINGULAR_TOL))
+    law = ""
+    if first.size:
+        j = int(first[0])
+        before = [k for k in range(j) if diag[k] >= np.sqrt(SINGULAR_TOL)]
+        coef = np.linalg.lstsq(unit[:, before], unit[:, j], rcond=None)[0] if before else []
+        involved = [names[j], *(names[before[k]] for k in np.argsort(-np.abs(coef))
+                                if abs(coef[k]) > 1e-6)][:6]  # fmt: skip
+        law = f": {_relation(unit, norm, names, j, before)}" if before else ""
+    else:
+        involved = [names[k] for k in np.argsort(-np.abs(null)) if abs(null[k]) > 0.05][:6]
+    several = f"; one of {dimension} independent such combinations" if dimension > 1 else ""
+    head = (f"terms {involved} are exactly collinear on this data (a combination of them is "
+            f"zero to {ratio:.0e} of the largest{several}){law}")  # fmt: skip
+    inputs = set(trajs[0].input_names) if trajs else set()
+    carried = [n for n in involved if {f.var for f in parse_term(n)} & inputs]
+    if len(carried) == 1 and first.size:
+        name = sorted({f.var for f in parse_term(carried[0])} & inputs)[0]
+        return head + (
+            f": {name!r} follows the states exactly (feedback with no excitation of its own), "
+            f"so its terms cannot be told from the controller's state terms; record flights "
+            f"in which {name} also moves independently of the states (dither on it, reference "
+            "changes)"
+        )
+    return head + (": record data in which they vary independently (other inputs, larger "
+                   "angles), or remove all but one of them")  # fmt: skip
+
+
+FEEDBACK_FACTOR = 3.0
+"""An input term is refused as feedback where what the state-only terms leave of it is under
+this many times the share its logging resolution alone leaves (rounded regulation logs:
+0.75 to 0.99; 1 % dither logged to 4 decimals: 20; float64 logs: 1e11 and more)."""
+
+
+def _feedback(
+    unit: np.ndarray, norm: np.ndarray, names: Sequence[str], trajs: Sequence[Trajectory]
+) -> str:
+    """A refusal where an input follows the states to within its logging resolution.
+
+    Under feedback with no excitation of its own an input is a function of the states; the
+    data then say nothing of its effect that the controller's state terms do not say as well.
+    Exactly (float64) that is a singular library; logged to a few decimals the rounding hides
+    it from a round-off test and adds a variation that did not act on the vehicle. A trial's
+    regulation flights with inputs logged to 4 decimals gave 36 terms for 7, the controller's
+    gains in ``z_dot'``, exact on held-out regulation and worse than holding the state on
+    tracking flights, with exit 0. Each input term's residual after projection on the
+    state-only terms (a share of its norm) is compared with the share its inputs' rounding
+    leaves (:func:`identification.data.logged_resolution`).
+    """
+    from identification.data import logged_resolution
+
+    inputs = list(trajs[0].input_names)
+    uses = [{f.var for f in parse_term(n)} & set(inputs) for n in names]
+    state_only = [j for j, used in enumerate(uses) if not used]
+    carried = [j for j, used in enumerate(uses) if used]
+    if not state_only or not carried:
+        return ""
+    u = np.concatenate([tr.u for tr in trajs])
+    share = {name: logged_resolution(u[:, k]) / np.sqrt(12.0) / np.sqrt(np.mean(u[:, k] ** 2))
+             for k, name in enumerate(inputs)}  # fmt: skip
+    basis = np.linalg.qr(unit[:, state_only])[0]
+    left = np.linalg.norm(unit[:, carried] - basis @ (basis.T @ unit[:, carried]), axis=0)
+    floor = np.array([max(share[v] for v in uses[j]) for j in carried])
+    below = np.flatnonzero(left < FEEDBACK_FACTOR * floor)
+    if not below.size:
+        return ""
+    worst = int(below[0])  # the simplest such term (library order): the input itself, if it is
+    j = carried[worst]
+    name = sorted(uses[j])[0]
+    return (
+        f"input {name!r} follows the states to within its logging resolution: "
+        f"{_relation(unit, norm, names, j, state_only)} leaves {left[worst]:.2g} of "
+        f"{names[j]!r}, the rounding of the logged {name} alone {floor[worst]:.2g}. Under "
+        "feedback with no excitation of its own, its terms cannot be told from the "
+        f"controller's state terms: record flights in which {name} also moves independently "
+        "of the states (dither on it, reference changes), or log it at full precision if it did"
+    )
 
 
 def _same_signals(trajs: Sequence[Trajectory]) -> tuple[str, str] | None:

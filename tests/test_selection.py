@@ -117,6 +117,69 @@ def test_collinear_columns_are_refused_naming_them(other_clean):
         fit([Trajectory(tr.t, x, tr.u, PS, PI)], lib, FitConfig())
 
 
+def _regulated(seed: int, steps: int = 600, dither: float = 0.0, decimals: tuple = ()):
+    """A planar PD hover regulator's flight (m = 0.6 kg, Ixx = 4e-3; a trial's closed loop):
+    the inputs are a function of the states, plus ``dither`` (relative), logged rounded to
+    ``decimals`` (per input; none: full precision)."""
+    params = PlanarQuadParams(mass=0.6, Ixx=4e-3, arm_length=0.15, rotor_force_max=6.0)
+    rhs = planar_drag_rhs(params, 0.0)
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-1.0, 1.0, 6) * [0.3, 0.3, 0.1, 0.3, 0.3, 0.3]
+    dt, m, g = 0.01, params.mass, 9.81
+    xs, us = [], []
+    for _ in range(steps):
+        y, z, phi, y_dot, z_dot, phi_dot = x
+        phi_ref = (1.0 * y + 1.5 * y_dot) / g  # y'' = -g phi near hover
+        u = np.array([m * (g - 4.0 * z - 3.0 * z_dot),
+                      params.Ixx * (40.0 * (phi_ref - phi) - 10.0 * phi_dot)])  # fmt: skip
+        u *= 1.0 + dither * rng.standard_normal(2)
+        xs.append(x)
+        us.append([np.round(v, d) for v, d in zip(u, decimals, strict=True)] if decimals else u)
+        k1 = rhs(x, u)
+        k2 = rhs(x + 0.5 * dt * k1, u)
+        k3 = rhs(x + 0.5 * dt * k2, u)
+        x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + rhs(x + dt * k3, u))
+    return Trajectory(dt * np.arange(steps), np.array(xs), np.array(us), PS, PI)
+
+
+def test_inputs_that_follow_the_states_are_refused_naming_the_law():
+    """Closed-loop regulation, no excitation: the inputs are the controller's law of the
+    states, so input and state terms stand in for each other. Exactly, the library is
+    singular and the simplest relation, the law, is named (one of a null space of several);
+    logged to 4 decimals it is no longer singular, and a trial got 36 terms for 7 with exit 0;
+    it is refused against the logging resolution. Real excitation at that rounding is not."""
+    from identification.data import logged_resolution
+    from identification.fit import Gram, check_identifiable, grams
+
+    exact = [_regulated(seed) for seed in range(3)]
+    with pytest.raises(ValueError, match=r"\['u1', '1', 'z_dot', 'z'\] are exactly") as refused:
+        select_model(exact, planar_library())
+    assert "u1 = 5.886 - 1.8 z_dot - 2.4 z" in str(refused.value)
+    assert "'u1' follows the states exactly" in str(refused.value)
+    rounded = [_regulated(seed, decimals=(4, 6)) for seed in range(3)]  # N and N m
+    assert logged_resolution(np.concatenate([t.u[:, 0] for t in rounded])) == 1e-4
+    with pytest.raises(ValueError, match="input 'u1' follows the states to within its logging"):
+        select_model(rounded, planar_library())
+    names = planar_library()
+    dithered = [_regulated(seed, dither=0.01, decimals=(4, 6)) for seed in range(3)]
+    check_identifiable(Gram.stack(grams(dithered, names, "forward", 1)), names, dithered)
+    # the same flights logged at full precision pass: nothing is rounded away
+    full = [_regulated(seed, dither=1e-5) for seed in range(3)]
+    check_identifiable(Gram.stack(grams(full, names, "forward", 1)), names, full)
+
+
+def test_logged_resolution_reads_decimals_float32_and_float64():
+    from identification.data import logged_resolution
+
+    v = 5.9 + 0.1 * np.random.default_rng(0).standard_normal(500)
+    assert logged_resolution(np.round(v, 4)) == 1e-4
+    assert logged_resolution(np.round(v * 100)) == 1.0  # integer counts (PWM)
+    single = float(np.spacing(np.float32(v.max())))
+    assert logged_resolution(v.astype(np.float32)) == single
+    assert logged_resolution(np.round(v.astype(np.float32).astype(float), 10)) == single
+    assert logged_resolution(v) == np.spacing(np.abs(v).max())
+
+
 def test_cli_errors_are_one_line_and_nonzero(tmp_path):
     path = tmp_path / "short.csv"
     path.write_text("t,y,z,phi,y_dot,z_dot,phi_dot,u1,u2\n" + "\n".join(
