@@ -483,8 +483,10 @@ def check_identifiable(
 def _relation(
     unit: np.ndarray, norm: np.ndarray, names: Sequence[str], j: int, among: Sequence[int]
 ) -> str:
-    """``names[j]`` as the least-squares combination of the columns ``among``, in data units
-    (its 5 largest parts by contribution): the law an input follows, where it is feedback."""
+    """``names[j]`` as the least-squares combination of the columns ``among``, in data units.
+
+    Its 5 largest parts by contribution: the law an input follows, where it is feedback.
+    """
     among = list(among)
     coef = np.linalg.lstsq(unit[:, among], unit[:, j], rcond=None)[0]
     order = [k for k in np.argsort(-np.abs(coef)) if abs(coef[k]) > 1e-3 * np.abs(coef).max()]

@@ -118,9 +118,11 @@ def test_collinear_columns_are_refused_naming_them(other_clean):
 
 
 def _regulated(seed: int, steps: int = 600, dither: float = 0.0, decimals: tuple = ()):
-    """A planar PD hover regulator's flight (m = 0.6 kg, Ixx = 4e-3; a trial's closed loop):
-    the inputs are a function of the states, plus ``dither`` (relative), logged rounded to
-    ``decimals`` (per input; none: full precision)."""
+    """A planar PD hover regulator's flight (m = 0.6 kg, Ixx = 4e-3; a trial's closed loop).
+
+    The inputs are a function of the states, plus ``dither`` (relative), logged rounded to
+    ``decimals`` (per input; none: full precision).
+    """
     params = PlanarQuadParams(mass=0.6, Ixx=4e-3, arm_length=0.15, rotor_force_max=6.0)
     rhs = planar_drag_rhs(params, 0.0)
     rng = np.random.default_rng(seed)
