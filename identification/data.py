@@ -257,7 +257,7 @@ def logged_resolution(values: np.ndarray) -> float:
     step = float(np.spacing(big))
     for k in range(13):
         scaled = v * 10.0**k
-        if np.max(np.abs(scaled - np.round(scaled))) <= 1e-6 + 4 * np.spacing(big * 10.0**k):
+        if np.max(np.abs(scaled - np.round(scaled))) <= 16 * np.spacing(big * 10.0**k):
             step = 10.0**-k
             break
     # float32 values, printed to k decimals or not, sit within half a step of a float32
