@@ -980,6 +980,7 @@ def read_log(
     angles: Sequence[str] = (),
     measured: Sequence[str] = (),
     time_unit: float = 1.0,
+    angle_unit: float = 1.0,
 ) -> tuple[list[Trajectory], CleanReport]:
     """Reads a raw CSV or parquet log and :func:`clean` s it: segments and what was dropped.
 
@@ -994,11 +995,17 @@ def read_log(
         angles: Angle variables (unwrapped by :func:`clean`).
         measured: Inputs that are measured signals (:attr:`Trajectory.measured`).
         time_unit: Seconds per unit of the time column (1e-3 for milliseconds).
+        angle_unit: Radians per unit of the angle states (pi / 180 for degrees): they are
+            converted before unwrapping, and the model sees radians.
 
     Returns:
         Clean segments and the report.
     """
     cols, data, st, inp = _read_table(path, columns, system, states, inputs, time, time_unit)
+    if angle_unit != 1.0:
+        data = data.copy()
+        for name in set(angles) & set(st):
+            data[:, cols.index(name)] *= angle_unit
     segs, report = clean(
         data[:, cols.index(time)], data[:, [cols.index(c) for c in st]],
         data[:, [cols.index(c) for c in inp]], st, inp, angles=angles, measured=measured,
@@ -1055,12 +1062,13 @@ def load_data(
     angles: Sequence[str] = (),
     measured: Sequence[str] = (),
     time_unit: float = 1.0,
+    angle_unit: float = 1.0,
 ) -> tuple[list[Trajectory], CleanReport]:
     """Reads CSV and parquet logs (cleaned: :func:`read_log`) and NPZ archives as segments.
 
     Arguments as :func:`read_log` (``time``: the logs' time column, in seconds unless
-    ``time_unit`` says otherwise; ``angles``: the angle variables, unwrapped; ``measured``:
-    the inputs that are measured signals).
+    ``time_unit`` says otherwise; ``angles``: the angle variables, unwrapped, in radians
+    unless ``angle_unit`` says otherwise; ``measured``: the inputs that are measured signals).
 
     Returns:
         The segments and the merged cleaning report.
@@ -1082,13 +1090,14 @@ def load_data(
                 segs = []
                 for tr in load_npz(path):
                     t = (tr.t - tr.t[0]) * time_unit if time_unit != 1.0 else tr.t
-                    part, rep = clean(t, tr.x, tr.u, tr.state_names, tr.input_names,
+                    turn = [angle_unit if n in angles else 1.0 for n in tr.state_names]
+                    part, rep = clean(t, tr.x * turn, tr.u, tr.state_names, tr.input_names,
                                       angles=angles, measured=measured)  # fmt: skip
                     segs += part
                     report = report.merge(rep)
             else:
                 segs, rep = read_log(path, columns, system, states, inputs, time, angles,
-                                     measured, time_unit)  # fmt: skip
+                                     measured, time_unit, angle_unit)  # fmt: skip
                 report = report.merge(rep)
         except ValueError as exc:
             message = str(exc)

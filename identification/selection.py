@@ -1706,17 +1706,21 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
     """
     notes = []
     dt = float(np.median([t.dt for t in trajs]))
-    if dt >= 1.0:
+    if dt >= 1.0:  # the unit that brings the step under a second
+        name, per = next((n, p) for n, p in (("nanoseconds", 1e9), ("microseconds", 1e6),
+                                             ("milliseconds", 1e3)) if dt >= p / 1e3)  # fmt: skip
+        flag = {"milliseconds": "ms", "microseconds": "us", "nanoseconds": "ns"}[name]
         notes.append(
-            f"the time step is {dt:g} s: a log in milliseconds gives rates 1000 times too small "
-            "(say its unit: --time-unit ms, or time_unit=1e-3 in load_data)"
+            f"the time step is {dt:g} s: a log in {name} gives rates {per:g} times too small "
+            f"(say its unit: --time-unit {flag}, or time_unit={1 / per:g} in load_data)"
         )
     names = [*trajs[0].state_names, *trajs[0].input_names]
     inside = trig_variables(feature_names)
     peaks = np.max([np.abs(np.column_stack([t.x, t.u])).max(axis=0) for t in trajs], axis=0)
     notes += [
         f"{name} reaches {peak:.3g} inside sin/cos: angles are in radians (a log in degrees "
-        "gives wrong models; an angle that turns several times is fine)"
+        "gives wrong models: say its unit, --angle-unit deg or angle_unit=pi/180 in "
+        "load_data; an angle that turns several times is fine)"
         for name, peak in zip(names, peaks, strict=True)
         if name in inside and peak > 2 * np.pi
     ]

@@ -32,6 +32,8 @@ app.add_typer(bench_app, name="bench")
 SystemName = Enum("SystemName", {name: name for name in VEHICLES}, type=str)
 """The registered vehicles (``quad_envs.vehicles.VEHICLES``) as command-line choices."""
 TimeUnit = Enum("TimeUnit", {name: name for name in ("s", "ms", "us", "ns")}, type=str)
+AngleUnit = Enum("AngleUnit", {name: name for name in ("rad", "deg")}, type=str)
+RADIANS_PER = {"rad": 1.0, "deg": math.pi / 180.0}
 """Units of a numeric time column."""
 SECONDS_PER = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 
@@ -314,6 +316,10 @@ def identify(
     time_unit: Annotated[
         TimeUnit, typer.Option(help="unit of a numeric time column (timestamps are read as such)")
     ] = TimeUnit.s,
+    angle_unit: Annotated[
+        AngleUnit,
+        typer.Option(help="unit of the angle states in the logs (converted to radians)"),
+    ] = AngleUnit.rad,
     states: Annotated[str | None, typer.Option(help="state columns, comma-separated")] = None,
     inputs: Annotated[str | None, typer.Option(help="input columns, comma-separated")] = None,
     angles: Annotated[str | None, typer.Option(help="angle states (Fourier terms)")] = None,
@@ -398,8 +404,9 @@ def identify(
         declared = split(angles) or in_spec or list(PRESET_ANGLES.get(preset or "", ()))
         read = (data, split(columns), preset, split(states), split(inputs), time.strip())
         unit = SECONDS_PER[time_unit.value]
+        turn = RADIANS_PER[angle_unit.value]
         trajs, cleaning = load_data(*read, angles=declared, measured=split(measured) or (),
-                                    time_unit=unit)  # fmt: skip
+                                    time_unit=unit, angle_unit=turn)  # fmt: skip
         first = trajs[0]
         library_note = None
         if preset is None and library is None and angles is None:
@@ -411,8 +418,8 @@ def identify(
                 )
                 declared = list(PRESET_ANGLES.get(preset, ()))
                 as_preset = (data, split(columns), preset, None, None, time.strip())
-                trajs, cleaning = load_data(*as_preset, angles=declared,
-                                            measured=first.measured, time_unit=unit)  # fmt: skip
+                trajs, cleaning = load_data(*as_preset, angles=declared, measured=first.measured,
+                                            time_unit=unit, angle_unit=turn)  # fmt: skip
                 first = trajs[0]
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")
@@ -513,6 +520,8 @@ def identify(
     model.meta["data"] = {**dataclasses.asdict(cleaning), "summary": cleaning.summary()}
     if input_shift:
         model.meta["input_shift"] = input_shift
+    # how the logs were read: score reads held-out logs the same way by default
+    model.meta["units"] = {"time": time_unit.value, "angles": angle_unit.value}
     model.save(out)
     typer.echo("\n".join(model.equations()))
     typer.echo(f"wrote {out}")
@@ -525,8 +534,13 @@ def score(
     seconds: Annotated[float, typer.Option(help="prediction horizon [s]")] = 1.0,
     time: Annotated[str, typer.Option(help="time column")] = "t",
     time_unit: Annotated[
-        TimeUnit, typer.Option(help="unit of a numeric time column (timestamps are read as such)")
-    ] = TimeUnit.s,
+        TimeUnit | None,
+        typer.Option(help="unit of a numeric time column (default: as the model was trained)"),
+    ] = None,
+    angle_unit: Annotated[
+        AngleUnit | None,
+        typer.Option(help="unit of the angle states (default: as the model was trained)"),
+    ] = None,
     input_shift: Annotated[
         int | None,
         typer.Option(
@@ -559,11 +573,16 @@ def score(
     try:
         loaded = load_model(model)
         angles = sorted(trig_variables(loaded.feature_names) & set(loaded.state_names))
+        units = _trained_units(loaded, model, time_unit, angle_unit)
         trajs, cleaning = load_data(
             data, states=loaded.state_names, inputs=loaded.input_names, time=time,
             angles=angles, measured=loaded.meta.get("measured_inputs", ()),
-            time_unit=SECONDS_PER[time_unit.value],
+            time_unit=SECONDS_PER[units["time"]], angle_unit=RADIANS_PER[units["angles"]],
         )  # fmt: skip
+        read_as = [f"{what} in {unit}" for what, unit in units.items()
+                   if unit not in ("s", "rad")]  # fmt: skip
+        if read_as:
+            typer.echo(f"data: {' and '.join(read_as)}, as the model's training logs")
         shift = loaded.meta.get("input_shift", 0) if input_shift is None else input_shift
         if isinstance(shift, bool) or not isinstance(shift, int):
             _fail(f"{model}: input_shift must be a whole number of rows, got {shift!r}")
@@ -616,6 +635,22 @@ def score(
     if result.diverged:
         typer.echo(f"warning: the prediction diverged from {result.diverged} of "
                    f"{result.starts} starts (left out of the errors above)")  # fmt: skip
+
+
+def _trained_units(
+    model: Any, path: Path, time_unit: Any | None, angle_unit: Any | None
+) -> dict[str, str]:
+    """The time and angle units to read held-out logs in: the options, else the model's."""
+    stored = model.meta.get("units")
+    stored = stored if isinstance(stored, dict) else {}
+    out = {}
+    for key, given, table in (("time", time_unit, SECONDS_PER), ("angles", angle_unit,
+                                                                 RADIANS_PER)):  # fmt: skip
+        unit = given.value if given is not None else stored.get(key, next(iter(table)))
+        if unit not in table:
+            _fail(f"{path}: units.{key} must be one of {', '.join(table)}, got {unit!r}")
+        out[key] = unit
+    return out
 
 
 @app.command()

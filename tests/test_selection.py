@@ -1529,6 +1529,47 @@ def test_score_predicts_held_out_flights_against_an_analytic_reference(tmp_path,
     assert "milliseconds" in flagged.output, flagged.output
 
 
+def test_logs_in_degrees_and_milliseconds_give_the_si_model_and_score_reads_them_alike(
+    tmp_path, other_clean
+):
+    """--angle-unit deg converts the angles before unwrapping (a trial: tilts under 6.3 deg
+    passed every check and gave a flipped thrust term, 11.5 % at 1 s); the units are stored
+    in the model and ``score`` reads held-out logs in them by default."""
+    si, odd = [], []
+    for k, t in enumerate(other_clean):
+        x = t.x.copy()
+        x[:, 2] = np.degrees(x[:, 2])
+        si.append(str(write_trajectory_csv(tmp_path / f"si{k}.csv", t)))
+        odd.append(str(write_trajectory_csv(tmp_path / f"odd{k}.csv",
+                                            Trajectory(1000 * t.t, x, t.u, PS, PI))))  # fmt: skip
+    fixed = ["--system", "planar", "--lambda", "1e-3", "--window", "1"]
+    runs = {}
+    for name, paths, units in (("si", si, []), ("odd", odd, ["--angle-unit", "deg",
+                                                               "--time-unit", "ms"])):  # fmt: skip
+        out = tmp_path / f"{name}.json"
+        done = CliRunner().invoke(app, ["identify", *paths[:2], "--out", str(out), *fixed, *units])
+        assert done.exit_code == 0, done.output
+        runs[name] = load_model(out)
+    np.testing.assert_allclose(runs["odd"].coefficients, runs["si"].coefficients,
+                               rtol=1e-6, atol=1e-9)  # fmt: skip
+    assert runs["odd"].meta["units"] == {"time": "ms", "angles": "deg"}
+    scored = CliRunner().invoke(app, ["score", str(tmp_path / "odd.json"), odd[2]])
+    same = CliRunner().invoke(app, ["score", str(tmp_path / "si.json"), si[2]])
+    assert scored.exit_code == 0 and "data: time in ms and angles in deg" in scored.output
+
+    def scores(output: str) -> list[float]:  # the score and holding the state's
+        line = next(line for line in output.splitlines() if line.startswith("score"))
+        return [float(part.split(";")[0]) for part in line.split(": ")[1:]]
+
+    (ours, hold), (theirs, hold_si) = scores(scored.output), scores(same.output)
+    assert ours < 1e-9 and theirs < 1e-9 and hold == pytest.approx(hold_si, rel=1e-9)
+    # without the unit, a log in microseconds is named as such
+    micro = Trajectory(1e6 * other_clean[0].t, other_clean[0].x, other_clean[0].u, PS, PI)
+    path = str(write_trajectory_csv(tmp_path / "us.csv", micro))
+    said = CliRunner().invoke(app, ["identify", path, "--out", str(tmp_path / "us.json"), *fixed])
+    assert "a log in microseconds" in said.output and "--time-unit us" in said.output
+
+
 def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean):
     """White measurement noise in the targets shrinks about as 1 / window; a term the library
     lacks leaves the same residual at every window (a held-out trial's Z-Y-X log, 38
