@@ -1724,6 +1724,7 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
         for name, peak in zip(names, peaks, strict=True)
         if name in inside and peak > 2 * np.pi
     ]
+    notes += _unit_mismatch(trajs)
     jumps = np.max([np.abs(np.diff(np.column_stack([t.x, t.u]), axis=0)).max(axis=0)
                     for t in trajs], axis=0)  # fmt: skip
     notes += [
@@ -1732,6 +1733,46 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
         for name, jump in zip(names, jumps, strict=True)
         if name in inside and jump > 0.9 * 2 * np.pi
     ]
+    return notes
+
+
+UNIT_FACTOR = 100.0
+"""A file whose variables' spreads differ from the other files' by at least this factor, the
+same for two or more variables (within a factor of 2), is named as logged in another unit."""
+
+
+def _unit_mismatch(trajs: Sequence[Trajectory]) -> list[str]:
+    """Files that look logged in another unit than the others: one note per such file.
+
+    A unit changes several variables by one factor (mm for m: positions and velocities by
+    1000), where flights of another kind change each variable by its own. A scale trial's
+    3 files in m and 1 in mm gave a model without thrust or gravity, worse than holding the
+    state, with only outlier notes.
+    """
+    by_file: dict[str, list[Trajectory]] = {}
+    for t in trajs:
+        by_file.setdefault(str(t.meta.get("source", "")), []).append(t)
+    if len(by_file) < 2 or "" in by_file:
+        return []
+    names = [*trajs[0].state_names, *trajs[0].input_names]
+    spread = np.array([np.std(np.vstack([np.column_stack([t.x, t.u]) for t in segs]), axis=0)
+                       for segs in by_file.values()])  # fmt: skip
+    notes = []
+    for i, path in enumerate(by_file):
+        others = np.median(np.delete(spread, i, axis=0), axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            logs = np.log10(spread[i] / others)
+        far = np.flatnonzero(np.isfinite(logs) & (np.abs(logs) >= np.log10(UNIT_FACTOR)))
+        if far.size < 2:
+            continue
+        centre = np.median(logs[far])
+        same = far[np.abs(logs[far] - centre) <= np.log10(2.0)]
+        if same.size >= 2:
+            notes.append(
+                f"{path}: {', '.join(names[k] for k in same)} vary about {10 ** abs(centre):.3g} "
+                f"times {'more' if centre > 0 else 'less'} than in the other files: logged in "
+                "another unit (mm for m, g for kg)? Convert it, or leave the file out"
+            )
     return notes
 
 

@@ -1570,6 +1570,27 @@ def test_logs_in_degrees_and_milliseconds_give_the_si_model_and_score_reads_them
     assert "a log in microseconds" in said.output and "--time-unit us" in said.output
 
 
+def test_a_file_in_another_unit_among_the_others_is_named(tmp_path, other_clean):
+    """One unit scales several variables by one factor (a trial's file in mm among files in
+    m: no thrust or gravity in the model, with only outlier notes); flights of other kinds,
+    each variable by its own factor, are not named."""
+    from identification.selection import data_warnings
+
+    paths = [
+        str(write_trajectory_csv(tmp_path / f"m{k}.csv", t)) for k, t in enumerate(other_clean)
+    ]
+    millimetres = other_clean[0].x * [1000, 1000, 1, 1000, 1000, 1]
+    paths.append(str(write_trajectory_csv(tmp_path / "mm.csv", Trajectory(
+        other_clean[0].t, millimetres, other_clean[0].u, PS, PI))))  # fmt: skip
+    trajs, _ = load_data(paths, system="planar", angles=["phi"])
+    named = [w for w in data_warnings(trajs) if "another unit" in w]
+    assert len(named) == 1 and named[0].startswith(f"{paths[-1]}: y, z, y_dot, z_dot vary"), named
+    gentle = planar_flights(OTHER_PLANAR, FlightSpec(flights=1, steps=600, tilt=0.02, seed=8))
+    calm = [*paths[:3], str(write_trajectory_csv(tmp_path / "calm.csv", gentle[0]))]
+    trajs, _ = load_data(calm, system="planar", angles=["phi"])
+    assert not [w for w in data_warnings(trajs) if "another unit" in w]
+
+
 def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean):
     """White measurement noise in the targets shrinks about as 1 / window; a term the library
     lacks leaves the same residual at every window (a held-out trial's Z-Y-X log, 38
