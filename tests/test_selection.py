@@ -117,11 +117,14 @@ def test_collinear_columns_are_refused_naming_them(other_clean):
         fit([Trajectory(tr.t, x, tr.u, PS, PI)], lib, FitConfig())
 
 
-def _regulated(seed: int, steps: int = 600, dither: float = 0.0, decimals: tuple = ()):
+def _regulated(
+    seed: int, steps: int = 600, dither: float = 0.0, decimals: tuple = (), hops: bool = False
+):
     """A planar PD hover regulator's flight (m = 0.6 kg, Ixx = 4e-3; a trial's closed loop).
 
     The inputs are a function of the states, plus ``dither`` (relative), logged rounded to
-    ``decimals`` (per input; none: full precision).
+    ``decimals`` (per input; none: full precision); with ``hops`` the set point jumps by
+    0.5 m every 150 rows (the input steps there).
     """
     params = PlanarQuadParams(mass=0.6, Ixx=4e-3, arm_length=0.15, rotor_force_max=6.0)
     rhs = planar_drag_rhs(params, 0.0)
@@ -129,10 +132,11 @@ def _regulated(seed: int, steps: int = 600, dither: float = 0.0, decimals: tuple
     x = rng.uniform(-1.0, 1.0, 6) * [0.3, 0.3, 0.1, 0.3, 0.3, 0.3]
     dt, m, g = 0.01, params.mass, 9.81
     xs, us = [], []
-    for _ in range(steps):
+    for k in range(steps):
+        target = 0.5 * ((k // 150) % 2) if hops else 0.0
         y, z, phi, y_dot, z_dot, phi_dot = x
-        phi_ref = (1.0 * y + 1.5 * y_dot) / g  # y'' = -g phi near hover
-        u = np.array([m * (g - 4.0 * z - 3.0 * z_dot),
+        phi_ref = (1.0 * (y - target) + 1.5 * y_dot) / g  # y'' = -g phi near hover
+        u = np.array([m * (g - 4.0 * (z - target) - 3.0 * z_dot),
                       params.Ixx * (40.0 * (phi_ref - phi) - 10.0 * phi_dot)])  # fmt: skip
         u *= 1.0 + dither * rng.standard_normal(2)
         xs.append(x)
@@ -168,6 +172,27 @@ def test_inputs_that_follow_the_states_are_refused_naming_the_law():
     # the same flights logged at full precision pass: nothing is rounded away
     full = [_regulated(seed, dither=1e-5) for seed in range(3)]
     check_identifiable(Gram.stack(grams(full, names, "forward", 1)), names, full)
+
+
+def test_control_kinks_at_set_point_steps_are_kept_and_glitches_are_not():
+    """An input step bends a state (its slope changes at one row): the residual off the
+    neighbours' line is large there but zero before it, and rebounds only after (the input
+    settling). A trial's clean tracking flights lost 13 such rows as outliers. A glitch of
+    one or two rows rebounds on both sides of its run and is still cut."""
+    from identification.data import clean
+
+    flight = _regulated(0, steps=900, hops=True)
+    names = (flight.state_names, flight.input_names)
+    bends = np.abs(np.diff(flight.u[:, 1])) > 10 * np.median(np.abs(np.diff(flight.u[:, 1])))
+    assert bends.sum() >= 5  # the set point hops bend phi_dot at 5 rows
+    _, report = clean(flight.t, flight.x, flight.u, *names)
+    assert report.outlier_rows == 0
+    for rows in ([300], [420, 421]):
+        x = flight.x.copy()
+        x[rows, 5] += 20 * flight.x[:, 5].std()
+        segments, report = clean(flight.t, x, flight.u, *names)
+        assert report.outlier_rows == len(rows)  # the glitch's rows, not their neighbours
+        assert np.flatnonzero(segments[0].missing).tolist() == rows
 
 
 def test_logged_resolution_reads_decimals_float32_and_float64():
