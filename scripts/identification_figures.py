@@ -131,8 +131,17 @@ def main() -> None:
         default=0,
         help="instead: 6-DOF, two vehicles, sigma = 1e-3 and 1e-2 over this many seeds",
     )
+    parser.add_argument(
+        "--many-logs",
+        action="store_true",
+        help="instead: time of the automatic selection on many logs (100 and 200 noisy "
+        "planar flights of 1000 rows, 25 clean 6-DOF ones; about 2 minutes)",
+    )
     args = parser.parse_args()
     config = FitConfig(optimizer=args.optimizer)
+    if args.many_logs:
+        many_logs(config)
+        return
     if args.sweep:
         sweep(args.sweep, config)
         return
@@ -427,6 +436,32 @@ def sweep6(seeds, config):
             f"{len(rows)}; no equation worse than the truth on {sum(r[1] for r in rows)} "
             f"of {len(rows)}"
         )
+
+
+def many_logs(config: FitConfig) -> None:
+    """Selection time against the number of logs (the scale trial: 100 logs of 1000 rows took
+    5 times as long as one log of 100 000 rows)."""
+    print("| data | rows | time [s] | terms | choice |")
+    print("|---|---|---|---|---|")
+    cases = [
+        ("planar, sigma = 1e-3, 100 logs", OTHER_PLANAR, 100, 1e-3),
+        ("planar, sigma = 1e-3, 200 logs", OTHER_PLANAR, 200, 1e-3),
+        ("planar, sigma = 1e-3, 1 log", OTHER_PLANAR, 1, 1e-3),
+        ("6-DOF, clean, 25 logs", OTHER_6DOF, 25, 0.0),
+    ]
+    for label, vehicle, count, sigma in cases:
+        steps = 100_000 if count == 1 else 1000
+        spec = FlightSpec(flights=count, steps=steps, seed=7)
+        if vehicle is OTHER_6DOF:
+            data, lib = quad6dof_flights(vehicle, spec), quad6dof_library()
+        else:
+            data, lib = planar_flights(vehicle, spec), planar_library()
+        data = add_noise(data, sigma) if sigma else data
+        t0 = time.perf_counter()
+        model, report = select_model(data, lib, config=config)
+        seconds = time.perf_counter() - t0
+        print(f"| {label} | {sum(len(t) for t in data)} | {seconds:.1f} | {model.n_terms} | "
+              f"w={report.best.window} lam={report.best.lam:.1e} |", flush=True)  # fmt: skip
 
 
 if __name__ == "__main__":
