@@ -580,13 +580,13 @@ def _feedback(
     below = np.flatnonzero(left < FEEDBACK_FACTOR * floor)
     if not below.size:
         return ""
-    worst = int(below[0])  # the simplest such term (library order): the input itself, if it is
-    j = carried[worst]
+    first = int(below[0])  # the simplest such term (library order): the input itself, if it is
+    j = carried[first]
     name = sorted(uses[j])[0]
     return (
         f"input {name!r} follows the states to within its logging resolution: "
-        f"{_relation(unit, norm, names, j, state_only)} leaves {left[worst]:.2g} of "
-        f"{names[j]!r}, the rounding of the logged {name} alone {floor[worst]:.2g}. Under "
+        f"{_relation(unit, norm, names, j, state_only)} leaves {left[first]:.2g} of "
+        f"{names[j]!r}, the rounding of the logged {name} alone {floor[first]:.2g}. Under "
         "feedback with no excitation of its own, its terms cannot be told from the "
         f"controller's state terms: record flights in which {name} also moves independently "
         "of the states (dither on it, reference changes), or log it at full precision if it did"
