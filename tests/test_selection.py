@@ -1588,6 +1588,11 @@ def test_logs_in_degrees_and_milliseconds_give_the_si_model_and_score_reads_them
 
     (ours, hold), (theirs, hold_si) = scores(scored.output), scores(same.output)
     assert ours < 1e-9 and theirs < 1e-9 and hold == pytest.approx(hold_si, rel=1e-9)
+    damaged = runs["odd"]
+    damaged.meta["units"] = {"time": "hours", "angles": "deg"}
+    damaged.save(tmp_path / "damaged.json")
+    refused = CliRunner().invoke(app, ["score", str(tmp_path / "damaged.json"), odd[2]])
+    assert refused.exit_code == 2 and "units.time must be one of s, ms, us, ns" in refused.output
     # without the unit, a log in microseconds is named as such
     micro = Trajectory(1e6 * other_clean[0].t, other_clean[0].x, other_clean[0].u, PS, PI)
     path = str(write_trajectory_csv(tmp_path / "us.csv", micro))
