@@ -393,7 +393,7 @@ class CleanReport:
         )
 
 
-def _glitches(resid: np.ndarray, bad: np.ndarray, mad: np.ndarray) -> np.ndarray:
+def _glitches(resid: np.ndarray, bad: np.ndarray, mad: np.ndarray, threshold: float) -> np.ndarray:
     """The rows of ``resid`` (off the neighbours' line) that are displaced, not bent.
 
     Rows displaced by d (one or two in a run) rebound on both sides: the rows just before and
@@ -402,25 +402,25 @@ def _glitches(resid: np.ndarray, bad: np.ndarray, mad: np.ndarray) -> np.ndarray
     one row) is quiet before its row and settles after it the other way, by more than it
     rebounds: a trial's clean tracking flights had 13 rows cut as outliers at their set
     point steps, and the peak rule this replaces cut the rebound rows of a two-row glitch,
-    not the glitch. Each run of ``bad`` rows is read on its worst state: a block of rows of
-    one sign is displaced where the rows on both sides of it are of the other sign, each
-    0.25 to 1.5 times the block's row next to it (at either end of the log one side is
-    missing: such blocks are kept, where a flight's first input step bends its states).
+    not the glitch. Each state is read on its own (a glitch in z beside a set point step
+    that bends phi_dot more, a trial, is still a glitch in z): in each run of its rows past
+    ``threshold`` robust deviations (and ``bad``), a block of rows of one sign is displaced
+    where the rows on both sides of it are of the other sign, each 0.25 to 1.5 times the
+    block's row next to it. At either end of the log one side is missing: such blocks are
+    kept (a flight's first input step bends its states there).
     """
     out = np.zeros(len(resid), dtype=bool)
-    rows = np.flatnonzero(bad)
-    for run in np.split(rows, np.flatnonzero(np.diff(rows) > 1) + 1) if rows.size else []:
-        worst = run[np.argmax(np.max(np.abs(resid[run]) / mad, axis=1))]
-        r = resid[:, int(np.argmax(np.abs(resid[worst]) / mad))]
-        signs = np.sign(r[run])
-        blocks = np.split(run, np.flatnonzero(np.diff(signs) != 0) + 1)
-        for block in blocks:
-            a, b = block[0] - 1, block[-1] + 1
-            if a < 0 or b >= len(r):
-                continue  # at an end of the log one side is missing: a kink there is common
-            sides = ((r[a], r[block[0]]), (r[b], r[block[-1]]))
-            if all(s * e < 0 and 0.25 <= abs(s) / abs(e) <= 1.5 for s, e in sides):
-                out[block] = True
+    for c in range(resid.shape[1]):
+        r = resid[:, c]
+        rows = np.flatnonzero(bad & (np.abs(r) > threshold * mad[c]))
+        for run in np.split(rows, np.flatnonzero(np.diff(rows) > 1) + 1) if rows.size else []:
+            for block in np.split(run, np.flatnonzero(np.diff(np.sign(r[run])) != 0) + 1):
+                a, b = block[0] - 1, block[-1] + 1
+                if a < 0 or b >= len(r):
+                    continue  # at an end of the log one side is missing: a kink there is common
+                sides = ((r[a], r[block[0]]), (r[b], r[block[-1]]))
+                if all(s * e < 0 and 0.25 <= abs(s) / abs(e) <= 1.5 for s, e in sides):
+                    out[block] = True
     return out
 
 
@@ -554,7 +554,7 @@ def clean(
         step = np.diff(ts)
         near_gap = np.maximum(step[:-1], step[1:]) > gap_factor * np.median(step)
         bad = np.any(np.abs(resid) > outlier_z * mad, axis=1) & ~near_gap  # gaps split anyway
-        outliers[idx[1:-1][_glitches(resid, bad, mad)]] = True
+        outliers[idx[1:-1][_glitches(resid, bad, mad, outlier_z)]] = True
     report.outlier_rows = int(outliers.sum())
     bad_x |= outliers
     spikes = _input_spikes(u, np.flatnonzero(~dropped))

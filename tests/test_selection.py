@@ -118,26 +118,32 @@ def test_collinear_columns_are_refused_naming_them(other_clean):
 
 
 def _regulated(
-    seed: int, steps: int = 600, dither: float = 0.0, decimals: tuple = (), hops: bool = False
+    seed: int,
+    steps: int = 600,
+    dither: float = 0.0,
+    decimals: tuple = (),
+    hop: float = 0.0,
+    stiff: float = 1.0,
 ):
     """A planar PD hover regulator's flight (m = 0.6 kg, Ixx = 4e-3; a trial's closed loop).
 
     The inputs are a function of the states, plus ``dither`` (relative), logged rounded to
-    ``decimals`` (per input; none: full precision); with ``hops`` the set point jumps by
-    0.5 m every 150 rows (the input steps there).
+    ``decimals`` (per input; none: full precision); the set point jumps by ``hop`` [m]
+    every 150 rows (the inputs step there); ``stiff`` scales the attitude loop's gains.
     """
     params = PlanarQuadParams(mass=0.6, Ixx=4e-3, arm_length=0.15, rotor_force_max=6.0)
     rhs = planar_drag_rhs(params, 0.0)
     rng = np.random.default_rng(seed)
     x = rng.uniform(-1.0, 1.0, 6) * [0.3, 0.3, 0.1, 0.3, 0.3, 0.3]
     dt, m, g = 0.01, params.mass, 9.81
+    kp, kd = 40.0 * stiff**2, 10.0 * stiff
     xs, us = [], []
     for k in range(steps):
-        target = 0.5 * ((k // 150) % 2) if hops else 0.0
+        target = hop * ((k // 150) % 2)
         y, z, phi, y_dot, z_dot, phi_dot = x
         phi_ref = (1.0 * (y - target) + 1.5 * y_dot) / g  # y'' = -g phi near hover
         u = np.array([m * (g - 4.0 * (z - target) - 3.0 * z_dot),
-                      params.Ixx * (40.0 * (phi_ref - phi) - 10.0 * phi_dot)])  # fmt: skip
+                      params.Ixx * (kp * (phi_ref - phi) - kd * phi_dot)])  # fmt: skip
         u *= 1.0 + dither * rng.standard_normal(2)
         xs.append(x)
         us.append([np.round(v, d) for v, d in zip(u, decimals, strict=True)] if decimals else u)
@@ -181,15 +187,16 @@ def test_control_kinks_at_set_point_steps_are_kept_and_glitches_are_not():
     one or two rows rebounds on both sides of its run and is still cut."""
     from identification.data import clean
 
-    flight = _regulated(0, steps=900, hops=True)
+    flight = _regulated(0, steps=900, hop=4.0, stiff=3.0)
     names = (flight.state_names, flight.input_names)
     bends = np.abs(np.diff(flight.u[:, 1])) > 10 * np.median(np.abs(np.diff(flight.u[:, 1])))
     assert bends.sum() >= 5  # the set point hops bend phi_dot at 5 rows
     _, report = clean(flight.t, flight.x, flight.u, *names)
     assert report.outlier_rows == 0
-    for rows in ([300], [420, 421]):
+    # the last: a glitch in z at a set point step, which bends phi_dot more (a trial)
+    for rows, state, size in (([300], 5, 20), ([420, 421], 5, 20), ([451, 452], 1, 1.4)):
         x = flight.x.copy()
-        x[rows, 5] += 20 * flight.x[:, 5].std()
+        x[rows, state] += size * flight.x[:, state].std()
         segments, report = clean(flight.t, x, flight.u, *names)
         assert report.outlier_rows == len(rows)  # the glitch's rows, not their neighbours
         assert np.flatnonzero(segments[0].missing).tolist() == rows
