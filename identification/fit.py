@@ -559,38 +559,146 @@ def _feedback(
     it from a round-off test and adds a variation that did not act on the vehicle. A trial's
     regulation flights with inputs logged to 4 decimals gave 36 terms for 7, the controller's
     gains in ``z_dot'``, exact on held-out regulation and worse than holding the state on
-    tracking flights, with exit 0. Each input term's residual after projection on the
-    state-only terms (a share of its norm) is compared with the share its inputs' rounding
-    leaves (:func:`identification.data.logged_resolution`).
+    tracking flights, with exit 0.
+
+    Each input term's residual after projection on the state-only terms (a share of its
+    norm) is compared with the share the rounding of its inputs leaves in that term
+    (:func:`identification.data.logged_resolution`, through the term's derivative in the
+    input on the data: a product's floor is not its bare input's: an adversarial trial's
+    ``sin(phi) u2`` was refused against ``u2``'s floor, 4 to 5 times too high). Where the
+    input's own rest (its bare term's, where the library has it) is what acted, a command
+    rounded before it was applied (integer PWM), the input is not refused
+    (:func:`_rest_acts`; the same trial's actuator-rounded flights were refused, and are
+    identified exactly).
     """
     from identification.data import logged_resolution
 
-    inputs = list(trajs[0].input_names)
+    first = trajs[0]
+    inputs = list(first.input_names)
     uses = [{f.var for f in parse_term(n)} & set(inputs) for n in names]
     state_only = [j for j, used in enumerate(uses) if not used]
     carried = [j for j, used in enumerate(uses) if used]
     if not state_only or not carried:
         return ""
-    u = np.concatenate([tr.u for tr in trajs])
-    share = {name: logged_resolution(u[:, k]) / np.sqrt(12.0) / np.sqrt(np.mean(u[:, k] ** 2))
-             for k, name in enumerate(inputs)}  # fmt: skip
     basis = np.linalg.qr(unit[:, state_only])[0]
-    left = np.linalg.norm(unit[:, carried] - basis @ (basis.T @ unit[:, carried]), axis=0)
-    floor = np.array([max(share[v] for v in uses[j]) for j in carried])
+    away = unit[:, carried] - basis @ (basis.T @ unit[:, carried])
+    left = np.linalg.norm(away, axis=0)
+    floor = _rounding_share([names[j] for j in carried], uses, carried, trajs,
+                            {n: logged_resolution(np.concatenate([t.u[:, k] for t in trajs]))
+                             for k, n in enumerate(inputs)})  # fmt: skip
     below = np.flatnonzero(left < FEEDBACK_FACTOR * floor)
     if not below.size:
         return ""
-    first = int(below[0])  # the simplest such term (library order): the input itself, if it is
-    j = carried[first]
-    name = sorted(uses[j])[0]
-    return (
-        f"input {name!r} follows the states to within its logging resolution: "
-        f"{_relation(unit, norm, names, j, state_only)} leaves {left[first]:.2g} of "
-        f"{names[j]!r}, the rounding of the logged {name} alone {floor[first]:.2g}. Under "
-        "feedback with no excitation of its own, its terms cannot be told from the "
-        f"controller's state terms: record flights in which {name} also moves independently "
-        "of the states (dither on it, reference changes), or log it at full precision if it did"
-    )
+    judged: dict[str, bool] = {}
+    for k in below:
+        j = carried[k]
+        name = sorted(uses[j])[0]
+        if name not in judged:  # on the bare input where the library has it
+            probe = names.index(name) if name in names else j
+            judged[name] = _rest_acts(trajs, names, state_only, probe)
+        if judged[name]:  # its rounding acted: a command rounded before it was applied (PWM)
+            continue
+        return (
+            f"input {name!r} follows the states to within its logging resolution: "
+            f"{_relation(unit, norm, names, j, state_only)} leaves {left[k]:.2g} of "
+            f"{names[j]!r}, the rounding of the logged {name} alone {floor[k]:.2g}, and that "
+            "rest does not move the states. Under feedback with no excitation of its own, "
+            "its terms cannot be told from the controller's state terms: record flights in "
+            f"which {name} also moves independently of the states (dither on it, reference "
+            "changes), or log it at full precision"
+        )
+    return ""
+
+
+DIFF_ORDER = 3
+"""Differences taken before the correlation: the smooth rest (the law beyond the library)
+drops as dt^3, the white rounding stays."""
+
+ACTS_T = 5.0
+"""|t| of the correlation between the row-to-row changes of an input term's rest (off the
+state-only terms) and of a state's one-step residual above which the rest moved the vehicle
+(5 standard errors, Bonferroni-safe over a few equations)."""
+
+
+def _rest_acts(
+    trajs: Sequence[Trajectory], names: Sequence[str], state_only: Sequence[int], j: int,
+    rows: int = 50_000,
+) -> bool:  # fmt: skip
+    """Whether what the state-only terms leave of term ``j`` moved the states.
+
+    A command rounded before it was applied (integer PWM) acts with its rounding; one
+    rounded only when logged does not. The rounding is white, the controller's smooth rest
+    (the law beyond the library) is not: the third differences (:data:`DIFF_ORDER`) of the
+    term's rest and of each state's one-step residual off the state-only terms (forward
+    differences) are correlated where the rounding acted, and not where it did not (first
+    differences left enough of a ``1 / cos(phi)`` law to call its logged rounding acting).
+    On up to ``rows`` rows.
+    """
+    first = trajs[0]
+    columns = [names[k] for k in state_only] + [names[j]]
+    theta = compile_features(columns, first.state_names, first.input_names)
+    feats, targets, starts, used = [], [], [], 0
+    for tr in trajs:
+        n = min(len(tr) - 1, rows - used)
+        if n < 3:
+            continue
+        feats.append(theta(tr.x[:n], tr.u[:n]))
+        targets.append(np.diff(tr.x[: n + 1], axis=0) / np.diff(tr.t[: n + 1])[:, None])
+        starts.append(used)
+        used += n
+    if not feats:
+        return False
+    a, y = np.vstack(feats), np.vstack(targets)
+    scale = np.sqrt(np.mean(a**2, axis=0))
+    scale[scale == 0] = 1.0
+    coef = np.linalg.lstsq(a[:, :-1] / scale[:-1], np.column_stack([a[:, -1], y]), rcond=None)[0]
+    rest = np.column_stack([a[:, -1], y]) - (a[:, :-1] / scale[:-1]) @ coef
+    order = DIFF_ORDER
+    keep = np.ones(len(rest) - order, dtype=bool)
+    for start in starts[1:]:  # no difference across two segments
+        keep[max(start - order, 0) : start] = False
+    change = np.diff(rest, n=order, axis=0)[keep]
+    change -= change.mean(axis=0)
+    size = np.sqrt(np.sum(change**2, axis=0))
+    if size[0] == 0:
+        return False
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = (change[:, 1:].T @ change[:, 0]) / (size[1:] * size[0])
+        t = np.abs(r) * np.sqrt(max(len(change) - 2, 1)) / np.sqrt(np.maximum(1 - r**2, 1e-300))
+    return bool(np.any(np.nan_to_num(t) > ACTS_T))
+
+
+def _rounding_share(
+    terms: Sequence[str],
+    uses: Sequence[set[str]],
+    carried: Sequence[int],
+    trajs: Sequence[Trajectory],
+    step: dict[str, float],
+    rows: int = 20_000,
+) -> np.ndarray:
+    """Per input term, the share of its norm the rounding of its inputs leaves in it.
+
+    Uniform rounding by a step q has a standard deviation q / sqrt(12); in a term f it leaves
+    about that times |df/du| (evaluated on up to ``rows`` evenly spread samples).
+    """
+    first = trajs[0]
+    x = np.concatenate([t.x for t in trajs])
+    u = np.concatenate([t.u for t in trajs])
+    pick = np.unique(np.linspace(0, len(x) - 1, min(rows, len(x))).astype(int))
+    x, u = x[pick], u[pick]
+    theta = compile_features(list(terms), first.state_names, first.input_names)
+    size = np.sqrt(np.mean(theta(x, u) ** 2, axis=0))
+    share = np.zeros(len(terms))
+    for k, name in enumerate(first.input_names):
+        h = 1e-6 * (np.sqrt(np.mean(u[:, k] ** 2)) or 1.0)
+        up, down = u.copy(), u.copy()
+        up[:, k] += h
+        down[:, k] -= h
+        slope = np.sqrt(np.mean(((theta(x, up) - theta(x, down)) / (2 * h)) ** 2, axis=0))
+        mine = np.array([name in uses[j] for j in carried])
+        part = step[name] / np.sqrt(12.0) * slope / np.where(size > 0, size, np.inf)
+        share = np.where(mine, np.maximum(share, part), share)
+    return share
 
 
 def _same_signals(trajs: Sequence[Trajectory]) -> tuple[str, str] | None:
