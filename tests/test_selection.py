@@ -124,12 +124,14 @@ def _regulated(
     decimals: tuple = (),
     hop: float = 0.0,
     stiff: float = 1.0,
+    applied: bool = False,
 ):
     """A planar PD hover regulator's flight (m = 0.6 kg, Ixx = 4e-3; a trial's closed loop).
 
     The inputs are a function of the states, plus ``dither`` (relative), logged rounded to
     ``decimals`` (per input; none: full precision); the set point jumps by ``hop`` [m]
-    every 150 rows (the inputs step there); ``stiff`` scales the attitude loop's gains.
+    every 150 rows (the inputs step there); ``stiff`` scales the attitude loop's gains. With
+    ``applied`` the rounded inputs are what acts (a command rounded before it is applied).
     """
     params = PlanarQuadParams(mass=0.6, Ixx=4e-3, arm_length=0.15, rotor_force_max=6.0)
     rhs = planar_drag_rhs(params, 0.0)
@@ -147,6 +149,7 @@ def _regulated(
         u *= 1.0 + dither * rng.standard_normal(2)
         xs.append(x)
         us.append([np.round(v, d) for v, d in zip(u, decimals, strict=True)] if decimals else u)
+        u = np.asarray(us[-1]) if applied else u
         k1 = rhs(x, u)
         k2 = rhs(x + 0.5 * dt * k1, u)
         k3 = rhs(x + 0.5 * dt * k2, u)
@@ -175,6 +178,22 @@ def test_inputs_that_follow_the_states_are_refused_naming_the_law():
     names = planar_library()
     dithered = [_regulated(seed, dither=0.01, decimals=(4, 6)) for seed in range(3)]
     check_identifiable(Gram.stack(grams(dithered, names, "forward", 1)), names, dithered)
+    # rounded before it was applied (PWM), the rounding moved the vehicle: not refused
+    acting = [_regulated(seed, decimals=(3, 5), applied=True) for seed in range(3)]
+    check_identifiable(Gram.stack(grams(acting, names, "forward", 1)), names, acting)
+    with pytest.raises(ValueError, match="input 'u1' follows the states to within"):
+        logged = [_regulated(seed, decimals=(3, 5)) for seed in range(3)]
+        check_identifiable(Gram.stack(grams(logged, names, "forward", 1)), names, logged)
+    # a product's rounding floor is its own: q / sqrt(12) rms(sin(phi)) / rms(sin(phi) u2)
+    from identification.fit import _rounding_share
+
+    x, u = np.vstack([t.x for t in logged]), np.vstack([t.u for t in logged])
+    share = _rounding_share(["u2", "sin(phi) u2"], [{"u2"}, {"u2"}], [0, 1], logged,
+                            {"u1": 1e-3, "u2": 1e-5})  # fmt: skip
+    sin_phi = np.sin(x[:, 2])
+    expected = 1e-5 / np.sqrt(12) * np.array([1 / np.sqrt(np.mean(u[:, 1] ** 2)),
+        np.sqrt(np.mean(sin_phi**2)) / np.sqrt(np.mean((sin_phi * u[:, 1]) ** 2))])  # fmt: skip
+    np.testing.assert_allclose(share, expected, rtol=1e-6)
     # the same flights logged at full precision pass: nothing is rounded away
     full = [_regulated(seed, dither=1e-5) for seed in range(3)]
     check_identifiable(Gram.stack(grams(full, names, "forward", 1)), names, full)
