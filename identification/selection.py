@@ -1724,7 +1724,7 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
         for name, peak in zip(names, peaks, strict=True)
         if name in inside and peak > 2 * np.pi
     ]
-    notes += _unit_mismatch(trajs)
+    notes += _unit_mismatch(trajs, inside)
     jumps = np.max([np.abs(np.diff(np.column_stack([t.x, t.u]), axis=0)).max(axis=0)
                     for t in trajs], axis=0)  # fmt: skip
     notes += [
@@ -1738,16 +1738,27 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
 
 UNIT_FACTOR = 100.0
 """A file whose variables' spreads differ from the other files' by at least this factor, the
-same for two or more variables (within a factor of 2), is named as logged in another unit."""
+same for three or more variables (within a factor of 2), is named as logged in another unit;
+so is one whose operating level (a thrust at hover) differs by :data:`LEVEL_FACTOR`."""
+
+LEVEL_FACTOR = 10.0
 
 
-def _unit_mismatch(trajs: Sequence[Trajectory]) -> list[str]:
+def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) -> list[str]:
     """Files that look logged in another unit than the others: one note per such file.
 
-    A unit changes several variables by one factor (mm for m: positions and velocities by
-    1000), where flights of another kind change each variable by its own. A scale trial's
-    3 files in m and 1 in mm gave a model without thrust or gravity, worse than holding the
-    state, with only outlier notes.
+    A unit changes some variables by one factor (mm for m: positions and velocities by 1000,
+    angles and rates as they were), where a flight of another amplitude changes them all: a
+    hover flight among tracking flights has velocities and rates 100 times smaller, and a
+    gentle one its rates and thrust 180 times (an adversarial trial: both were named). So
+    three or more variables off by one factor of :data:`UNIT_FACTOR` are named only where
+    some state is within 3 times of the other files' spread. A variable with an operating
+    level in every file (a thrust at hover, its median over 3 spreads from zero) keeps that
+    level whatever the flight: 10 times off is a unit (thrust in grams among files in
+    newtons, which the spreads missed). An angle
+    inside sin/cos spread 30 to 100 times more than in the others and past 1 rad is in
+    degrees. A scale trial's 3 files in m and 1 in mm gave a model without thrust or gravity,
+    worse than holding the state, with only outlier notes.
     """
     by_file: dict[str, list[Trajectory]] = {}
     for t in trajs:
@@ -1755,23 +1766,46 @@ def _unit_mismatch(trajs: Sequence[Trajectory]) -> list[str]:
     if len(by_file) < 2 or "" in by_file:
         return []
     names = [*trajs[0].state_names, *trajs[0].input_names]
-    spread = np.array([np.std(np.vstack([np.column_stack([t.x, t.u]) for t in segs]), axis=0)
-                       for segs in by_file.values()])  # fmt: skip
+    data = [np.vstack([np.column_stack([t.x, t.u]) for t in segs]) for segs in by_file.values()]
+    spread = np.array([np.std(d, axis=0) for d in data])
+    level = np.array([np.abs(np.median(d, axis=0)) for d in data])
+    peak = np.array([np.max(np.abs(d), axis=0) for d in data])
+    steady = np.all(level > 3 * spread, axis=0)
+    paths = list(by_file)
+    if len(paths) == 2:  # which of two is off cannot be told: one note names both
+        paths = paths[1:]
     notes = []
-    for i, path in enumerate(by_file):
-        others = np.median(np.delete(spread, i, axis=0), axis=0)
+    for path in paths:
+        i = list(by_file).index(path)
+        others = lambda a: np.median(np.delete(a, i, axis=0), axis=0)  # noqa: B023, E731
         with np.errstate(divide="ignore", invalid="ignore"):
-            logs = np.log10(spread[i] / others)
+            logs, levels = np.log10(spread[i] / others(spread)), level[i] / others(level)
+        said = []
         far = np.flatnonzero(np.isfinite(logs) & (np.abs(logs) >= np.log10(UNIT_FACTOR)))
-        if far.size < 2:
-            continue
-        centre = np.median(logs[far])
-        same = far[np.abs(logs[far] - centre) <= np.log10(2.0)]
-        if same.size >= 2:
+        states = len(trajs[0].state_names)
+        kept = np.isfinite(logs[:states]) & (np.abs(logs[:states]) <= np.log10(3.0))
+        if far.size >= 3 and kept.any():  # a unit leaves some states as they were
+            centre = np.median(logs[far])
+            same = far[np.abs(logs[far] - centre) <= np.log10(2.0)]
+            if same.size >= 3:
+                said.append(
+                    f"{', '.join(names[k] for k in same)} vary about "
+                    f"{10 ** abs(centre):.3g} times {'more' if centre > 0 else 'less'}"
+                )
+        for k in np.flatnonzero(steady & ((levels >= LEVEL_FACTOR) | (levels <= 1 / LEVEL_FACTOR))):
+            said.append(f"{names[k]} sits at {level[i, k]:.4g} against {others(level)[k]:.4g}")
+        for k, name in enumerate(names):
+            if name in angles and 30 <= 10 ** logs[k] <= 100 and peak[i, k] > 1.0:
+                said.append(
+                    f"{name} spreads {10 ** logs[k]:.3g} times more, to {peak[i, k]:.3g} (degrees?)"
+                )
+        if said:
+            where = path if len(by_file) > 2 else f"{path} against {list(by_file)[0]}"
+            against = "the other files" if len(by_file) > 2 else "it"
             notes.append(
-                f"{path}: {', '.join(names[k] for k in same)} vary about {10 ** abs(centre):.3g} "
-                f"times {'more' if centre > 0 else 'less'} than in the other files: logged in "
-                "another unit (mm for m, g for kg)? Convert it, or leave the file out"
+                f"{where}: {'; '.join(said)}, against {against}: logged in another "
+                "unit (mm for m, g for N, degrees for radians)? Convert it, or leave "
+                "the file out"
             )
     return notes
 

@@ -1641,10 +1641,20 @@ def test_a_file_in_another_unit_among_the_others_is_named(tmp_path, other_clean)
     trajs, _ = load_data(paths, system="planar", angles=["phi"])
     named = [w for w in data_warnings(trajs) if "another unit" in w]
     assert len(named) == 1 and named[0].startswith(f"{paths[-1]}: y, z, y_dot, z_dot vary"), named
-    gentle = planar_flights(OTHER_PLANAR, FlightSpec(flights=1, steps=600, tilt=0.02, seed=8))
-    calm = [*paths[:3], str(write_trajectory_csv(tmp_path / "calm.csv", gentle[0]))]
+    # a flight of 200 times smaller motion (a trial's gentle flight) changes every state's
+    # spread, a unit only some: not named
+    tr = other_clean[0]
+    at, hover = np.median(tr.x, axis=0), np.median(tr.u, axis=0)  # the same operating point
+    gentle = Trajectory(tr.t, at + (tr.x - at) / 200, hover + (tr.u - hover) / 200, PS, PI)
+    calm = [*paths[:3], str(write_trajectory_csv(tmp_path / "calm.csv", gentle))]
     trajs, _ = load_data(calm, system="planar", angles=["phi"])
     assert not [w for w in data_warnings(trajs) if "another unit" in w]
+    # thrust in grams-force: one variable, but its level at hover is a unit's
+    grams = Trajectory(other_clean[0].t, other_clean[0].x, other_clean[0].u * [101.97, 1], PS, PI)
+    trajs, _ = load_data([*paths[:3], str(write_trajectory_csv(tmp_path / "g.csv", grams))],
+                         system="planar", angles=["phi"])  # fmt: skip
+    named = [w for w in data_warnings(trajs) if "another unit" in w]
+    assert len(named) == 1 and "g.csv: u1 sits at" in named[0], named
 
 
 def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean):
