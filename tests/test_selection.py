@@ -1619,6 +1619,15 @@ def test_logs_in_degrees_and_milliseconds_give_the_si_model_and_score_reads_them
     damaged.save(tmp_path / "damaged.json")
     refused = CliRunner().invoke(app, ["score", str(tmp_path / "damaged.json"), odd[2]])
     assert refused.exit_code == 2 and "units.time must be one of s, ms, us, ns" in refused.output
+    # a refusal comes after the data's notes: they may name its cause
+    tr = other_clean[0]
+    stuck = Trajectory(1000 * tr.t, tr.x, np.column_stack([np.full(len(tr), 4.9), tr.u[:, 1]]),
+                       PS, PI)  # fmt: skip
+    path = str(write_trajectory_csv(tmp_path / "stuck.csv", stuck))
+    said = CliRunner().invoke(app, ["identify", path, "--out", str(tmp_path / "x.json")])
+    lines = said.output.strip().splitlines()
+    assert said.exit_code == 2 and lines[-1].startswith("error: input 'u1' is constant")
+    assert any("a log in milliseconds" in line for line in lines[:-1]), said.output
     # without the unit, a log in microseconds is named as such
     micro = Trajectory(1e6 * other_clean[0].t, other_clean[0].x, other_clean[0].u, PS, PI)
     path = str(write_trajectory_csv(tmp_path / "us.csv", micro))
