@@ -383,7 +383,7 @@ def identify(
     def split(text: str | None) -> list[str] | None:
         return [c.strip() for c in text.split(",") if c.strip()] if text else None
 
-    read: tuple = ()  # (data, library) once both are known: their notes precede a refusal
+    noted: tuple = ()  # (data, library) once both are known: their notes precede a refusal
 
     lam_value = _number_option("--lambda", lam, float, low=0.0) if lam != "auto" else None
     window_value = _number_option("--window", window, int, low=1) if window != "auto" else None
@@ -443,7 +443,7 @@ def identify(
             lib = library_from_spec(
                 library or preset, first.state_names, first.input_names, declared
             )
-            read = (trajs, lib)
+            noted = (trajs, lib)
             looks = [n for n in first.state_names if _looks_like_angle(n)]
             if looks and not declared and preset is None:
                 typer.echo(
@@ -490,7 +490,7 @@ def identify(
                     trajs, lib, config=config, windows=windows, system=label, progress=True,
                     drop_outliers=drop_outliers,
                 )  # fmt: skip
-                read = ()  # printed with the report
+                noted = ()  # printed with the report
                 best = report.best
                 if library_note:
                     typer.echo(library_note)
@@ -509,7 +509,7 @@ def identify(
                     _fail("--drop-outliers works with the automatic selection (--lambda auto)")
                 config = dataclasses.replace(config, lam=lam_value, window=window_value or 1)
                 model = fit(trajs, lib, config, label)
-                read = ()
+                noted = ()
                 if library_note:
                     typer.echo(library_note)
                 notes = data_warnings(trajs, lib)  # select_model reports them itself
@@ -521,7 +521,7 @@ def identify(
                 for note in filter(None, notes):
                     typer.echo(f"warning: {note}")
     except (ValueError, FileNotFoundError) as exc:
-        for note in data_warnings(*read) if read else ():  # the data's units may be the cause
+        for note in data_warnings(*noted) if noted else ():  # the data's units may be the cause
             typer.echo(f"warning: {note}")
         _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
     model.meta["data"] = {**dataclasses.asdict(cleaning), "summary": cleaning.summary()}
