@@ -318,7 +318,9 @@ def identify(
     ] = TimeUnit.s,
     angle_unit: Annotated[
         AngleUnit,
-        typer.Option(help="unit of the angle states in the logs (converted to radians)"),
+        typer.Option(
+            help="unit of the angle states in the logs (converted to radians; rates keep theirs)"
+        ),
     ] = AngleUnit.rad,
     states: Annotated[str | None, typer.Option(help="state columns, comma-separated")] = None,
     inputs: Annotated[str | None, typer.Option(help="input columns, comma-separated")] = None,
@@ -654,7 +656,7 @@ def _trained_units(
     for key, given, table in (("time", time_unit, SECONDS_PER), ("angles", angle_unit,
                                                                  RADIANS_PER)):  # fmt: skip
         unit = given.value if given is not None else stored.get(key, next(iter(table)))
-        if unit not in table:
+        if not isinstance(unit, str) or unit not in table:
             _fail(f"{path}: units.{key} must be one of {', '.join(table)}, got {unit!r}")
         out[key] = unit
     return out
