@@ -245,8 +245,8 @@ def logged_resolution(values: np.ndarray) -> float:
     """The step a logged signal was recorded in: a decimal place, float32 or float64.
 
     Rounded to k decimals (0 to 12), the step is 10^-k; stored as float32 (or float32 values
-    printed to k decimals), the float32 spacing at its largest magnitude where that is larger;
-    otherwise the float64 spacing there.
+    printed to k decimals, or in their shortest form), the float32 spacing at its largest
+    magnitude where that is larger; otherwise the float64 spacing there.
     """
     v = np.asarray(values, dtype=np.float64)
     v = v[np.isfinite(v)]
@@ -263,6 +263,11 @@ def logged_resolution(values: np.ndarray) -> float:
     # float32 values, printed to k decimals or not, sit within half a step of a float32
     if np.max(np.abs(v - v.astype(np.float32))) <= 0.5 * step + 4 * np.spacing(big):
         return max(step, single)
+    # float32 values printed in their shortest form (9 significant digits at most) read back
+    # as that text, not as the float32 itself
+    sample = v[np.unique(np.linspace(0, v.size - 1, min(v.size, 500)).astype(int))]
+    if all(float(np.format_float_positional(np.float32(a), unique=True)) == a for a in sample):
+        return single
     return step
 
 

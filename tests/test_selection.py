@@ -230,6 +230,8 @@ def test_logged_resolution_reads_decimals_float32_and_float64():
     single = float(np.spacing(np.float32(v.max())))
     assert logged_resolution(v.astype(np.float32)) == single
     assert logged_resolution(np.round(v.astype(np.float32).astype(float), 10)) == single
+    shortest = [float(np.format_float_positional(a, unique=True)) for a in v.astype(np.float32)]
+    assert logged_resolution(np.array(shortest)) == single  # float32 written as short text
     assert logged_resolution(v) == np.spacing(np.abs(v).max())
     tiny = 1e-7 * v  # kN m of a 28 g vehicle: not integers because they round to 0
     assert logged_resolution(tiny) == np.spacing(np.abs(tiny).max())
