@@ -598,6 +598,14 @@ def _feedback(
             judged[name] = _rest_acts(trajs, names, state_only, probe)
         if judged[name]:  # its rounding acted: a command rounded before it was applied (PWM)
             continue
+        values = np.concatenate([t.u[:, inputs.index(name)] for t in trajs])
+        quantum = logged_resolution(values)
+        if np.std(values) < FEEDBACK_FACTOR * quantum:  # no law needed: it barely moves
+            return (
+                f"input {name!r} varies little more than its logging step (standard deviation "
+                f"{np.std(values):.3g} against a step of {quantum:.3g}): its terms cannot be "
+                f"told from the rounding; log {name} at full precision, or excite it more"
+            )
         return (
             f"input {name!r} follows the states to within its logging resolution: "
             f"{_relation(unit, norm, names, j, state_only)} leaves {left[k]:.2g} of "

@@ -221,6 +221,31 @@ def test_control_kinks_at_set_point_steps_are_kept_and_glitches_are_not():
         assert np.flatnonzero(segments[0].missing).tolist() == rows
 
 
+def test_an_input_that_barely_moves_beyond_its_logging_step_is_refused_as_such():
+    """An open-loop moment of 0.004 N m logged to 2 decimals: the logged column is mostly its
+    rounding. Refused, named for that (an adversarial trial: the note said "follows the
+    states", a feedback law the flights never had)."""
+    params = PlanarQuadParams(mass=0.6, Ixx=4e-3, arm_length=0.15, rotor_force_max=6.0)
+    rhs, dt, flights = planar_drag_rhs(params, 0.0), 0.01, []
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        x, xs, us = np.zeros(6), [], []
+        phase = rng.uniform(0, 6, 2)
+        for k in range(600):
+            t = k * dt
+            thrust = 0.6 * 9.81 * (1 + 0.05 * np.sin(1.3 * t + phase[0]))
+            u = np.array([thrust, 0.004 * np.sin(2.1 * t + phase[1]) + 0.002 * np.sin(5.3 * t)])
+            xs.append(x)
+            us.append([u[0], np.round(u[1], 2)])
+            k1 = rhs(x, u)
+            k2 = rhs(x + 0.5 * dt * k1, u)
+            k3 = rhs(x + 0.5 * dt * k2, u)
+            x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + rhs(x + dt * k3, u))
+        flights.append(Trajectory(dt * np.arange(600), np.array(xs), np.array(us), PS, PI))
+    with pytest.raises(ValueError, match="input 'u2' varies little more than its logging step"):
+        select_model(flights, planar_library())
+
+
 def test_logged_resolution_reads_decimals_float32_and_float64():
     from identification.data import logged_resolution
 
