@@ -566,8 +566,10 @@ def _feedback(
     (:func:`identification.data.logged_resolution`, through the term's derivative in the
     input on the data: a product's floor is not its bare input's: an adversarial trial's
     ``sin(phi) u2`` was refused against ``u2``'s floor, 4 to 5 times too high). Where the
-    input's own rest (its bare term's, where the library has it) is what acted, a command
-    rounded before it was applied (integer PWM), the input is not refused
+    input's own rest (its bare term's, where that is at its rounding too; else the term's:
+    a second adversarial trial's ``u1 = m (g + a_z) / cos(phi)`` left ``u1`` a smooth rest
+    that acts while ``cos(phi) u1`` was the law) is what acted, a command rounded before it
+    was applied (integer PWM), the input is not refused
     (:func:`_rest_acts`; the same trial's actuator-rounded flights were refused, and are
     identified exactly).
     """
@@ -590,11 +592,12 @@ def _feedback(
     if not below.size:
         return ""
     judged: dict[str, bool] = {}
+    under = {names[carried[k]] for k in below}
     for k in below:
         j = carried[k]
         name = sorted(uses[j])[0]
-        if name not in judged:  # on the bare input where the library has it
-            probe = names.index(name) if name in names else j
+        if name not in judged:  # on the bare input where it is itself at its rounding
+            probe = names.index(name) if name in under else j
             judged[name] = _rest_acts(trajs, names, state_only, probe)
         if judged[name]:  # its rounding acted: a command rounded before it was applied (PWM)
             continue

@@ -1741,7 +1741,9 @@ UNIT_FACTOR = 100.0
 same for three or more variables (within a factor of 2), is named as logged in another unit;
 so is one whose operating level (a thrust at hover) differs by :data:`LEVEL_FACTOR`."""
 
-LEVEL_FACTOR = 10.0
+LEVEL_FACTOR = 5.0
+"""An input's operating level this many times off the other files' is a unit (kgf for N:
+9.81; a payload or a battery changes a hover thrust by tens of percent)."""
 
 
 def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) -> list[str]:
@@ -1752,10 +1754,11 @@ def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) 
     hover flight among tracking flights has velocities and rates 100 times smaller, and a
     gentle one its rates and thrust 180 times (an adversarial trial: both were named). So
     three or more variables off by one factor of :data:`UNIT_FACTOR` are named only where
-    some state is within 3 times of the other files' spread. A variable with an operating
+    some state is within 3 times of the other files' spread. An input with an operating
     level in every file (a thrust at hover, its median over 3 spreads from zero) keeps that
-    level whatever the flight: 10 times off is a unit (thrust in grams among files in
-    newtons, which the spreads missed). An angle
+    level whatever the flight: :data:`LEVEL_FACTOR` times off is a unit (thrust in grams or
+    kgf among files in newtons, which the spreads missed; positions are left out, their
+    origin is arbitrary). An angle
     inside sin/cos spread 30 to 100 times more than in the others and past 1 rad is in
     degrees. A scale trial's 3 files in m and 1 in mm gave a model without thrust or gravity,
     worse than holding the state, with only outlier notes.
@@ -1770,7 +1773,8 @@ def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) 
     spread = np.array([np.std(d, axis=0) for d in data])
     level = np.array([np.abs(np.median(d, axis=0)) for d in data])
     peak = np.array([np.max(np.abs(d), axis=0) for d in data])
-    steady = np.all(level > 3 * spread, axis=0)
+    steady = np.all(level > 3 * spread, axis=0)  # an input's operating point; positions
+    steady[: len(trajs[0].state_names)] = False  # have an arbitrary origin (a trial: z = 25 m)
     paths = list(by_file)
     if len(paths) == 2:  # which of two is off cannot be told: one note names both
         paths = paths[1:]

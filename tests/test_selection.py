@@ -125,18 +125,22 @@ def _regulated(
     hop: float = 0.0,
     stiff: float = 1.0,
     applied: bool = False,
+    tilted: bool = False,
+    spread: float = 1.0,
 ):
     """A planar PD hover regulator's flight (m = 0.6 kg, Ixx = 4e-3; a trial's closed loop).
 
     The inputs are a function of the states, plus ``dither`` (relative), logged rounded to
     ``decimals`` (per input; none: full precision); the set point jumps by ``hop`` [m]
     every 150 rows (the inputs step there); ``stiff`` scales the attitude loop's gains. With
-    ``applied`` the rounded inputs are what acts (a command rounded before it is applied).
+    ``applied`` the rounded inputs are what acts (a command rounded before it is applied);
+    with ``tilted`` the thrust is divided by cos(phi) (tilt compensation); ``spread`` scales
+    the initial offsets.
     """
     params = PlanarQuadParams(mass=0.6, Ixx=4e-3, arm_length=0.15, rotor_force_max=6.0)
     rhs = planar_drag_rhs(params, 0.0)
     rng = np.random.default_rng(seed)
-    x = rng.uniform(-1.0, 1.0, 6) * [0.3, 0.3, 0.1, 0.3, 0.3, 0.3]
+    x = spread * rng.uniform(-1.0, 1.0, 6) * [0.3, 0.3, 0.1, 0.3, 0.3, 0.3]
     dt, m, g = 0.01, params.mass, 9.81
     kp, kd = 40.0 * stiff**2, 10.0 * stiff
     xs, us = [], []
@@ -146,6 +150,7 @@ def _regulated(
         phi_ref = (1.0 * (y - target) + 1.5 * y_dot) / g  # y'' = -g phi near hover
         u = np.array([m * (g - 4.0 * (z - target) - 3.0 * z_dot),
                       params.Ixx * (kp * (phi_ref - phi) - kd * phi_dot)])  # fmt: skip
+        u[0] /= np.cos(phi) if tilted else 1.0
         u *= 1.0 + dither * rng.standard_normal(2)
         xs.append(x)
         us.append([np.round(v, d) for v, d in zip(u, decimals, strict=True)] if decimals else u)
@@ -178,6 +183,11 @@ def test_inputs_that_follow_the_states_are_refused_naming_the_law():
     names = planar_library()
     dithered = [_regulated(seed, dither=0.01, decimals=(4, 6)) for seed in range(3)]
     check_identifiable(Gram.stack(grams(dithered, names, "forward", 1)), names, dithered)
+    # tilt compensation leaves u1 a smooth rest that acts; cos(phi) u1 is the law
+    compensated = [_regulated(seed, decimals=(4, 6), tilted=True, spread=4) for seed in range(3)]
+    with pytest.raises(ValueError, match=r"'u1' follows .*: cos\(phi\) u1 = 5.88"):
+        check_identifiable(Gram.stack(grams(compensated, names, "forward", 1)), names,
+                           compensated)  # fmt: skip
     # rounded before it was applied (PWM), the rounding moved the vehicle: not refused
     acting = [_regulated(seed, decimals=(3, 5), applied=True) for seed in range(3)]
     check_identifiable(Gram.stack(grams(acting, names, "forward", 1)), names, acting)
@@ -213,12 +223,17 @@ def test_control_kinks_at_set_point_steps_are_kept_and_glitches_are_not():
     _, report = clean(flight.t, flight.x, flight.u, *names)
     assert report.outlier_rows == 0
     # the last: a glitch in z at a set point step, which bends phi_dot more (a trial)
-    for rows, state, size in (([300], 5, 20), ([420, 421], 5, 20), ([451, 452], 1, 1.4)):
+    # and three rows, whose middle row lies on its neighbours' line (a second trial)
+    cases = (([300], 5, 20), ([420, 421], 5, 20), ([451, 452], 1, 1.4), ([600, 601, 602], 2, 5))
+    for rows, state, size in cases:
         x = flight.x.copy()
         x[rows, state] += size * flight.x[:, state].std()
         segments, report = clean(flight.t, x, flight.u, *names)
         assert report.outlier_rows == len(rows)  # the glitch's rows, not their neighbours
-        assert np.flatnonzero(segments[0].missing).tolist() == rows
+        if len(rows) <= 2:  # bridged: kept as missing rows
+            assert np.flatnonzero(segments[0].missing).tolist() == rows
+        else:  # longer runs are cut out: the log splits there
+            assert report.cuts == 1 and sum(map(len, segments)) == len(flight) - len(rows)
 
 
 def test_an_input_that_barely_moves_beyond_its_logging_step_is_refused_as_such():
@@ -1692,6 +1707,15 @@ def test_a_file_in_another_unit_among_the_others_is_named(tmp_path, other_clean)
                          system="planar", angles=["phi"])  # fmt: skip
     named = [w for w in data_warnings(trajs) if "another unit" in w]
     assert len(named) == 1 and "g.csv: u1 sits at" in named[0], named
+    kgf = Trajectory(tr.t, tr.x, tr.u * [1 / 9.80665, 1], PS, PI)  # 9.81 times off
+    trajs, _ = load_data([*paths[:3], str(write_trajectory_csv(tmp_path / "kgf.csv", kgf))],
+                         system="planar", angles=["phi"])  # fmt: skip
+    assert any("kgf.csv: u1 sits at" in w for w in data_warnings(trajs))
+    # a flight 20 m away: positions have no natural origin, nothing is named
+    away = Trajectory(tr.t, tr.x + [20, 0, 0, 0, 0, 0], tr.u, PS, PI)
+    trajs, _ = load_data([*paths[:3], str(write_trajectory_csv(tmp_path / "far.csv", away))],
+                         system="planar", angles=["phi"])  # fmt: skip
+    assert not [w for w in data_warnings(trajs) if "another unit" in w]
 
 
 def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean):
