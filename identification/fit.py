@@ -626,7 +626,7 @@ DIFF_ORDER = 3
 drops as dt^3, the white rounding stays."""
 
 ACTS_T = 5.0
-"""|t| of the correlation between the row-to-row changes of an input term's rest (off the
+"""|t| of the correlation between the third differences of an input term's rest (off the
 state-only terms) and of a state's one-step residual above which the rest moved the vehicle
 (5 standard errors, Bonferroni-safe over a few equations)."""
 
