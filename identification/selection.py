@@ -1736,8 +1736,8 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
     return notes
 
 
-UNIT_FACTOR = 100.0
-"""A file whose variables' spreads differ from the other files' by at least this factor, the
+UNIT_FACTOR = 30.0
+"""A file whose variables' spreads differ from the median file's by at least this factor, the
 same for three or more variables (within a factor of 2), is named as logged in another unit;
 so is one whose operating level (a thrust at hover) differs by :data:`LEVEL_FACTOR`."""
 
@@ -1754,14 +1754,15 @@ def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) 
     hover flight among tracking flights has velocities and rates 100 times smaller, and a
     gentle one its rates and thrust 180 times (an adversarial trial: both were named). So
     three or more variables off by one factor of :data:`UNIT_FACTOR` are named only where
-    some state is within 3 times of the other files' spread. An input with an operating
-    level in every file (a thrust at hover, its median over 3 spreads from zero) keeps that
-    level whatever the flight: :data:`LEVEL_FACTOR` times off is a unit (thrust in grams or
-    kgf among files in newtons, which the spreads missed; positions are left out, their
-    origin is arbitrary). An angle
-    inside sin/cos spread 30 to 100 times more than in the others and past 1 rad is in
-    degrees. A scale trial's 3 files in m and 1 in mm gave a model without thrust or gravity,
-    worse than holding the state, with only outlier notes.
+    some state is within 3 times of the median file's spread and no angle is among them (no
+    unit of length or time scales an angle; a vertical flight's small roll does). An input
+    with an operating level in every file (a thrust at hover, its median over 3 spreads from
+    zero) keeps that level whatever the flight: :data:`LEVEL_FACTOR` times off is a unit
+    (thrust in grams or kgf among files in newtons, which the spreads missed; positions are
+    left out, their origin is arbitrary). An angle inside sin/cos spread 30 to 100 times
+    more than in the others and past 1 rad is in degrees. A scale trial's 3 files in m and 1
+    in mm gave a model without thrust or gravity, worse than holding the state, with only
+    outlier notes; one in cm among 3 (80 to 180 times) went unnamed at a factor of 100.
     """
     by_file: dict[str, list[Trajectory]] = {}
     for t in trajs:
@@ -1781,7 +1782,9 @@ def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) 
     notes = []
     for path in paths:
         i = list(by_file).index(path)
-        others = lambda a: np.median(np.delete(a, i, axis=0), axis=0)  # noqa: B023, E731
+        # against the median file (itself included): with 3 files, the median of the other
+        # two is their mean, half the odd file's (a trial's 3 files, one in cm: all 3 named)
+        others = lambda a: np.exp(np.median(np.log(np.maximum(a, 1e-300)), axis=0))  # noqa: E731
         with np.errstate(divide="ignore", invalid="ignore"):
             logs, levels = np.log10(spread[i] / others(spread)), level[i] / others(level)
         said = []
@@ -1791,7 +1794,8 @@ def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) 
         if far.size >= 3 and kept.any():  # a unit leaves some states as they were
             centre = np.median(logs[far])
             same = far[np.abs(logs[far] - centre) <= np.log10(2.0)]
-            if same.size >= 3:
+            if same.size >= 3 and not {names[k] for k in same} & angles:  # no unit of length
+                # or time scales an angle; a flight of another kind does (a vertical one)
                 said.append(
                     f"{', '.join(names[k] for k in same)} vary about "
                     f"{10 ** abs(centre):.3g} times {'more' if centre > 0 else 'less'}"

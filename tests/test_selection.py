@@ -1711,6 +1711,20 @@ def test_a_file_in_another_unit_among_the_others_is_named(tmp_path, other_clean)
     trajs, _ = load_data([*paths[:3], str(write_trajectory_csv(tmp_path / "kgf.csv", kgf))],
                          system="planar", angles=["phi"])  # fmt: skip
     assert any("kgf.csv: u1 sits at" in w for w in data_warnings(trajs))
+    # centimetres in one of three files: 100 times, and only that file named
+    cm = Trajectory(tr.t, tr.x * [100, 100, 1, 100, 100, 1], tr.u, PS, PI)
+    trajs, _ = load_data([*paths[1:3], str(write_trajectory_csv(tmp_path / "cm.csv", cm))],
+                         system="planar", angles=["phi"])  # fmt: skip
+    named = [w for w in data_warnings(trajs) if "another unit" in w]
+    assert len(named) == 1 and "cm.csv: y, z, y_dot, z_dot vary" in named[0], named
+    # a vertical flight: lateral motion, roll and moment 50 times smaller; no unit scales an
+    # angle, so nothing is named
+    lateral = np.array([1, 0, 1, 1, 0, 1], dtype=bool)
+    x = np.where(lateral, at + (tr.x - at) / 50, tr.x)
+    vertical = Trajectory(tr.t, x, tr.u * [1, 1 / 50], PS, PI)
+    trajs, _ = load_data([*paths[:3], str(write_trajectory_csv(tmp_path / "v.csv", vertical))],
+                         system="planar", angles=["phi"])  # fmt: skip
+    assert not [w for w in data_warnings(trajs, planar_library()) if "another unit" in w]
     # a flight 20 m away: positions have no natural origin, nothing is named
     away = Trajectory(tr.t, tr.x + [20, 0, 0, 0, 0, 0], tr.u, PS, PI)
     trajs, _ = load_data([*paths[:3], str(write_trajectory_csv(tmp_path / "far.csv", away))],
