@@ -482,10 +482,11 @@ def check_identifiable(
 
 def _relation(
     unit: np.ndarray, norm: np.ndarray, names: Sequence[str], j: int, among: Sequence[int]
-) -> str:
+) -> tuple[str, list[str]]:
     """``names[j]`` as the least-squares combination of the columns ``among``, in data units.
 
-    Its 5 largest parts by contribution: the law an input follows, where it is feedback.
+    Its 5 largest parts by contribution (the law an input follows, where it is feedback),
+    and the names of all parts above 1e-3 of the largest, largest first.
     """
     among = list(among)
     coef = np.linalg.lstsq(unit[:, among], unit[:, j], rcond=None)[0]
@@ -494,7 +495,8 @@ def _relation(
     terms = " ".join(f"{'-' if data[k] < 0 else '+'} {abs(data[k]):.4g}"
                      + ("" if names[among[k]] == "1" else f" {names[among[k]]}")
                      for k in order[:5])  # fmt: skip
-    return f"{names[j]} = {terms.removeprefix('+ ')}{' ...' if len(order) > 5 else ''}"
+    text = f"{names[j]} = {terms.removeprefix('+ ')}{' ...' if len(order) > 5 else ''}"
+    return text, [names[among[k]] for k in order]
 
 
 def _collinear_message(
@@ -519,10 +521,8 @@ def _collinear_message(
     if first.size:
         j = int(first[0])
         before = [k for k in range(j) if diag[k] >= np.sqrt(SINGULAR_TOL)]
-        coef = np.linalg.lstsq(unit[:, before], unit[:, j], rcond=None)[0] if before else []
-        involved = [names[j], *(names[before[k]] for k in np.argsort(-np.abs(coef))
-                                if abs(coef[k]) > 1e-6)][:6]  # fmt: skip
-        law = f": {_relation(unit, norm, names, j, before)}" if before else ""
+        text, parts = _relation(unit, norm, names, j, before) if before else ("", [])
+        involved, law = [names[j], *parts][:6], f": {text}" if text else ""
     else:
         involved = [names[k] for k in np.argsort(-np.abs(null)) if abs(null[k]) > 0.05][:6]
     several = f"; one of {dimension} independent such combinations" if dimension > 1 else ""
@@ -585,9 +585,9 @@ def _feedback(
     basis = np.linalg.qr(unit[:, state_only])[0]
     away = unit[:, carried] - basis @ (basis.T @ unit[:, carried])
     left = np.linalg.norm(away, axis=0)
-    floor = _rounding_share([names[j] for j in carried], uses, carried, trajs,
-                            {n: logged_resolution(np.concatenate([t.u[:, k] for t in trajs]))
-                             for k, n in enumerate(inputs)})  # fmt: skip
+    logged = {n: np.concatenate([t.u[:, k] for t in trajs]) for k, n in enumerate(inputs)}
+    quantum = {n: logged_resolution(values) for n, values in logged.items()}
+    floor = _rounding_share([names[j] for j in carried], uses, carried, trajs, quantum)
     below = np.flatnonzero(left < FEEDBACK_FACTOR * floor)
     if not below.size:
         return ""
@@ -601,17 +601,16 @@ def _feedback(
             judged[name] = _rest_acts(trajs, names, state_only, probe)
         if judged[name]:  # its rounding acted: a command rounded before it was applied (PWM)
             continue
-        values = np.concatenate([t.u[:, inputs.index(name)] for t in trajs])
-        quantum = logged_resolution(values)
-        if np.std(values) < FEEDBACK_FACTOR * quantum:  # no law needed: it barely moves
+        spread = float(np.std(logged[name]))
+        if spread < FEEDBACK_FACTOR * quantum[name]:  # no law needed: it barely moves
             return (
                 f"input {name!r} varies little more than its logging step (standard deviation "
-                f"{np.std(values):.3g} against a step of {quantum:.3g}): its terms cannot be "
+                f"{spread:.3g} against a step of {quantum[name]:.3g}): its terms cannot be "
                 f"told from the rounding; log {name} at full precision, or excite it more"
             )
         return (
             f"input {name!r} follows the states to within its logging resolution: "
-            f"{_relation(unit, norm, names, j, state_only)} leaves {left[k]:.2g} of "
+            f"{_relation(unit, norm, names, j, state_only)[0]} leaves {left[k]:.2g} of "
             f"{names[j]!r}, the rounding of the logged {name} alone {floor[k]:.2g}, and that "
             "rest does not move the states. Under feedback with no excitation of its own, "
             "its terms cannot be told from the controller's state terms: record flights in "

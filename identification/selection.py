@@ -344,8 +344,11 @@ def _rollouts(
     observed = np.concatenate([tr.observed for tr in trajs])
     steps = np.concatenate([np.append(np.diff(tr.t), np.nan) for tr in trajs])
     held = not any(tr.measured for tr in trajs)
-    stages = [np.concatenate(parts) for parts in zip(*[_all_stages(tr) for tr in trajs],
-                                                     strict=True)]  # fmt: skip
+    if held:  # each step's input is its row's
+        stages = [np.concatenate([tr.u for tr in trajs])]
+    else:
+        stages = [np.concatenate(parts) for parts in zip(*[_all_stages(tr) for tr in trajs],
+                                                         strict=True)]  # fmt: skip
     x = states[rows]
     for j in range(int(h_len.max(initial=0))):
         active = h_len > j
@@ -1777,19 +1780,20 @@ def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) 
     steady = np.all(level > 3 * spread, axis=0)  # an input's operating point; positions
     steady[: len(trajs[0].state_names)] = False  # have an arbitrary origin (a trial: z = 25 m)
     paths = list(by_file)
-    if len(paths) == 2:  # which of two is off cannot be told: one note names both
-        paths = paths[1:]
+    if len(paths) == 2:  # which of two is off cannot be told: the second, against the first
+        usual_spread, usual_level, judged = spread[0], level[0], [1]
+    else:  # against the median file, itself included: the median of the other two of three
+        # is their mean, half the odd file's (a trial's 3 files, one in cm: all 3 named)
+        usual_spread, usual_level = (np.exp(np.median(np.log(np.maximum(a, 1e-300)), axis=0))
+                                     for a in (spread, level))  # fmt: skip
+        judged = range(len(paths))
+    states = len(trajs[0].state_names)
     notes = []
-    for path in paths:
-        i = list(by_file).index(path)
-        # against the median file (itself included): with 3 files, the median of the other
-        # two is their mean, half the odd file's (a trial's 3 files, one in cm: all 3 named)
-        others = lambda a: np.exp(np.median(np.log(np.maximum(a, 1e-300)), axis=0))  # noqa: E731
+    for i in judged:
         with np.errstate(divide="ignore", invalid="ignore"):
-            logs, levels = np.log10(spread[i] / others(spread)), level[i] / others(level)
+            logs, levels = np.log10(spread[i] / usual_spread), level[i] / usual_level
         said = []
         far = np.flatnonzero(np.isfinite(logs) & (np.abs(logs) >= np.log10(UNIT_FACTOR)))
-        states = len(trajs[0].state_names)
         kept = np.isfinite(logs[:states]) & (np.abs(logs[:states]) <= np.log10(3.0))
         if far.size >= 3 and kept.any():  # a unit leaves some states as they were
             centre = np.median(logs[far])
@@ -1801,15 +1805,15 @@ def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) 
                     f"{10 ** abs(centre):.3g} times {'more' if centre > 0 else 'less'}"
                 )
         for k in np.flatnonzero(steady & ((levels >= LEVEL_FACTOR) | (levels <= 1 / LEVEL_FACTOR))):
-            said.append(f"{names[k]} sits at {level[i, k]:.4g} against {others(level)[k]:.4g}")
+            said.append(f"{names[k]} sits at {level[i, k]:.4g} against {usual_level[k]:.4g}")
         for k, name in enumerate(names):
             if name in angles and 30 <= 10 ** logs[k] <= 100 and peak[i, k] > 1.0:
                 said.append(
                     f"{name} spreads {10 ** logs[k]:.3g} times more, to {peak[i, k]:.3g} (degrees?)"
                 )
         if said:
-            where = path if len(by_file) > 2 else f"{path} against {list(by_file)[0]}"
-            against = "the other files" if len(by_file) > 2 else "it"
+            where = paths[i] if len(paths) > 2 else f"{paths[1]} against {paths[0]}"
+            against = "the other files" if len(paths) > 2 else "it"
             notes.append(
                 f"{where}: {'; '.join(said)}, against {against}: logged in another "
                 "unit (mm for m, g for N, degrees for radians)? Convert it, or leave "
