@@ -591,7 +591,7 @@ def _feedback(
     below = np.flatnonzero(left < FEEDBACK_FACTOR * floor)
     if not below.size:
         return ""
-    judged: dict[str, bool] = {}
+    judged: dict[str, tuple[bool, float]] = {}
     under = {names[carried[k]] for k in below}
     for k in below:
         j = carried[k]
@@ -599,7 +599,8 @@ def _feedback(
         if name not in judged:  # on the bare input where it is itself at its rounding
             probe = names.index(name) if name in under else j
             judged[name] = _rest_acts(trajs, names, state_only, probe)
-        if judged[name]:  # its rounding acted: a command rounded before it was applied (PWM)
+        acted, power = judged[name]
+        if acted:  # its rounding acted: a command rounded before it was applied (PWM)
             continue
         spread = float(np.std(logged[name]))
         if spread < FEEDBACK_FACTOR * quantum[name]:  # no law needed: it barely moves
@@ -608,15 +609,22 @@ def _feedback(
                 f"{spread:.3g} against a step of {quantum[name]:.3g}): its terms cannot be "
                 f"told from the rounding; log {name} at full precision, or excite it more"
             )
-        return (
-            f"input {name!r} follows the states to within its logging resolution: "
-            f"{_relation(unit, norm, names, j, state_only)[0]} leaves {left[k]:.2g} of "
-            f"{names[j]!r}, the rounding of the logged {name} alone {floor[k]:.2g}, and that "
-            "rest does not move the states. Under feedback with no excitation of its own, "
-            "its terms cannot be told from the controller's state terms: record flights in "
-            f"which {name} also moves independently of the states (dither on it, reference "
-            "changes), or log it at full precision"
-        )
+        law = _relation(unit, norm, names, j, state_only)[0]
+        head = (f"input {name!r} follows the states to within its logging resolution: {law} "
+                f"leaves {left[k]:.2g} of {names[j]!r}, the rounding of the logged {name} "
+                f"alone {floor[k]:.2g}")  # fmt: skip
+        fix = (f"its terms cannot be told from the controller's state terms: record flights "
+               f"in which {name} also moves independently of the states (dither on it, "
+               "reference changes)")  # fmt: skip
+        if power < ACTS_T:  # had the rounding acted, the state noise would hide it
+            return (
+                f"{head}, and the state noise hides whether that rest moved the states (had "
+                f"it, {power:.2g} standard errors on these data). Under feedback with no "
+                f"excitation of its own, {fix}"
+            )
+        return (f"{head}, and that rest does not move the states (had it, {power:.2g} "
+                f"standard errors). Under feedback with no excitation of its own, {fix}, or "
+                f"log it at full precision")  # fmt: skip
     return ""
 
 
@@ -633,7 +641,7 @@ state-only terms) and of a state's one-step residual above which the rest moved 
 def _rest_acts(
     trajs: Sequence[Trajectory], names: Sequence[str], state_only: Sequence[int], j: int,
     rows: int = 50_000,
-) -> bool:  # fmt: skip
+) -> tuple[bool, float]:  # fmt: skip
     """Whether what the state-only terms leave of term ``j`` moved the states.
 
     A command rounded before it was applied (integer PWM) acts with its rounding; one
@@ -643,6 +651,13 @@ def _rest_acts(
     differences) are correlated where the rounding acted, and not where it did not (first
     differences left enough of a ``1 / cos(phi)`` law to call its logged rounding acting).
     On up to ``rows`` rows.
+
+    Returns whether it acted, and the test's power: the largest |t| over the states had the
+    rest acted with the effect the input has on the data (the term's state-explained part
+    regressed into each state's; where the input is a law of the states, its whole effect
+    lies there). Under state noise a rounding that acted can be under the test's reach (a
+    trial's actuator-rounded flights at sigma = 1e-3: about 1): the refusal then says that
+    the noise hides it, not that the rest did not act.
     """
     first = trajs[0]
     columns = [names[k] for k in state_only] + [names[j]]
@@ -657,12 +672,17 @@ def _rest_acts(
         starts.append(used)
         used += n
     if not feats:
-        return False
+        return False, 0.0
     a, y = np.vstack(feats), np.vstack(targets)
     scale = np.sqrt(np.mean(a**2, axis=0))
     scale[scale == 0] = 1.0
-    coef = np.linalg.lstsq(a[:, :-1] / scale[:-1], np.column_stack([a[:, -1], y]), rcond=None)[0]
-    rest = np.column_stack([a[:, -1], y]) - (a[:, :-1] / scale[:-1]) @ coef
+    both = np.column_stack([a[:, -1], y])
+    explained = (a[:, :-1] / scale[:-1]) @ np.linalg.lstsq(a[:, :-1] / scale[:-1], both,
+                                                             rcond=None)[0]  # fmt: skip
+    rest = both - explained
+    explained -= explained.mean(axis=0)
+    spread = explained[:, 0] @ explained[:, 0]
+    effect = explained[:, 1:].T @ explained[:, 0] / spread if spread > 0 else np.zeros(y.shape[1])
     order = DIFF_ORDER
     keep = np.ones(len(rest) - order, dtype=bool)
     for start in starts[1:]:  # no difference across two segments
@@ -671,11 +691,12 @@ def _rest_acts(
     change -= change.mean(axis=0)
     size = np.sqrt(np.sum(change**2, axis=0))
     if size[0] == 0:
-        return False
+        return False, 0.0
     with np.errstate(invalid="ignore", divide="ignore"):
         r = (change[:, 1:].T @ change[:, 0]) / (size[1:] * size[0])
         t = np.abs(r) * np.sqrt(max(len(change) - 2, 1)) / np.sqrt(np.maximum(1 - r**2, 1e-300))
-    return bool(np.any(np.nan_to_num(t) > ACTS_T))
+        power = np.abs(effect) * size[0] / size[1:] * np.sqrt(len(change))
+    return bool(np.any(np.nan_to_num(t) > ACTS_T)), float(np.max(np.nan_to_num(power)))
 
 
 def _rounding_share(

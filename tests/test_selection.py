@@ -127,6 +127,7 @@ def _regulated(
     applied: bool = False,
     tilted: bool = False,
     spread: float = 1.0,
+    noise: float = 0.0,
 ):
     """A planar PD hover regulator's flight (m = 0.6 kg, Ixx = 4e-3; a trial's closed loop).
 
@@ -135,7 +136,8 @@ def _regulated(
     every 150 rows (the inputs step there); ``stiff`` scales the attitude loop's gains. With
     ``applied`` the rounded inputs are what acts (a command rounded before it is applied);
     with ``tilted`` the thrust is divided by cos(phi) (tilt compensation); ``spread`` scales
-    the initial offsets.
+    the initial offsets; ``noise`` is the standard deviation of a white measurement noise on
+    every state, which the controller sees and the log holds.
     """
     params = PlanarQuadParams(mass=0.6, Ixx=4e-3, arm_length=0.15, rotor_force_max=6.0)
     rhs = planar_drag_rhs(params, 0.0)
@@ -146,13 +148,14 @@ def _regulated(
     xs, us = [], []
     for k in range(steps):
         target = hop * ((k // 150) % 2)
-        y, z, phi, y_dot, z_dot, phi_dot = x
+        seen = x + noise * rng.standard_normal(6) if noise else x
+        y, z, phi, y_dot, z_dot, phi_dot = seen
         phi_ref = (1.0 * (y - target) + 1.5 * y_dot) / g  # y'' = -g phi near hover
         u = np.array([m * (g - 4.0 * (z - target) - 3.0 * z_dot),
                       params.Ixx * (kp * (phi_ref - phi) - kd * phi_dot)])  # fmt: skip
         u[0] /= np.cos(phi) if tilted else 1.0
         u *= 1.0 + dither * rng.standard_normal(2)
-        xs.append(x)
+        xs.append(seen)
         us.append([np.round(v, d) for v, d in zip(u, decimals, strict=True)] if decimals else u)
         u = np.asarray(us[-1]) if applied else u
         k1 = rhs(x, u)
@@ -191,9 +194,18 @@ def test_inputs_that_follow_the_states_are_refused_naming_the_law():
     # rounded before it was applied (PWM), the rounding moved the vehicle: not refused
     acting = [_regulated(seed, decimals=(3, 5), applied=True) for seed in range(3)]
     check_identifiable(Gram.stack(grams(acting, names, "forward", 1)), names, acting)
-    with pytest.raises(ValueError, match="input 'u1' follows the states to within"):
+    with pytest.raises(ValueError, match="input 'u1' follows the states to within.*that rest "
+                       "does not move the states"):  # fmt: skip
         logged = [_regulated(seed, decimals=(3, 5)) for seed in range(3)]
         check_identifiable(Gram.stack(grams(logged, names, "forward", 1)), names, logged)
+    # under state noise (which the controller sees) the rounding's effect, had it acted, would
+    # be under 1 standard error: applied or only logged, the data cannot tell, and say so
+    for applied in (True, False):
+        noisy = [_regulated(seed, decimals=(3, 5), applied=applied, noise=3e-4)
+                 for seed in range(3)]  # fmt: skip
+        with pytest.raises(ValueError, match=r"the state noise hides whether that rest moved "
+                           r"the states \(had it, 0\.\d+ standard errors"):  # fmt: skip
+            check_identifiable(Gram.stack(grams(noisy, names, "forward", 1)), names, noisy)
     # a product's rounding floor is its own: q / sqrt(12) rms(sin(phi)) / rms(sin(phi) u2)
     from identification.fit import _rounding_share
 
