@@ -335,6 +335,13 @@ class CleanReport:
         segments: Number of segments returned.
         rows_out: Rows returned.
         jitter: Largest relative deviation of a step from the median step.
+        reordered: Rows sorted into time order (a logger that wrote them out of order).
+        held_inputs: Empty input cells filled from the row before (an input logged at a
+            lower rate than the states: a command holds until the next one).
+        regular: Segments whose time stamps varied only by their resolution (float32 or
+            rounded stamps), read as a regular grid.
+        notes: What reading the file changed, in words (cells that are not numbers read as
+            missing, text columns left out).
     """
 
     rows_in: int = 0
@@ -351,6 +358,10 @@ class CleanReport:
     segments: int = 0
     rows_out: int = 0
     jitter: float = 0.0
+    reordered: int = 0
+    held_inputs: int = 0
+    regular: int = 0
+    notes: list[str] = field(default_factory=list)
 
     def merge(self, other: CleanReport) -> CleanReport:
         """Sum of two reports (jitter: the larger)."""
@@ -365,8 +376,9 @@ class CleanReport:
         """Whether cleaning changed anything a user should hear about."""
         repaired = (self.stale_rows, self.nonfinite_rows, self.outlier_rows, self.gaps,
                     self.cuts, self.bridged, self.unwrapped, self.short_segments, self.input_spikes,
-                    self.restarts)  # fmt: skip
-        return self.rows_out != self.rows_in or any(repaired) or self.jitter > 1e-6
+                    self.restarts, self.reordered, self.held_inputs, self.regular)  # fmt: skip
+        changed = self.rows_out != self.rows_in or any(repaired) or self.jitter > 1e-6
+        return changed or bool(self.notes)
 
     def summary(self) -> str:
         """One line for users."""
@@ -394,8 +406,38 @@ class CleanReport:
                 if self.unwrapped
                 else ""
             )
+            + (
+                f"sorted {self.reordered} row(s) that were out of time order; "
+                if self.reordered
+                else ""
+            )
+            + (
+                f"held {self.held_inputs} empty input cell(s) at the row before's value "
+                "(an input logged at a lower rate: a command holds until the next); "
+                if self.held_inputs
+                else ""
+            )
+            + (
+                f"read the time stamps of {self.regular} segment(s) as a regular grid (their "
+                "steps varied only by the stamps' resolution: float32 or rounded); "
+                if self.regular
+                else ""
+            )
             + f"time-step jitter {100 * self.jitter:.1f} % (each row's own step is used)"
+            + "".join(f"; {note}" for note in _grouped(self.notes))
         )
+
+
+def _grouped(notes: Sequence[str]) -> list[str]:
+    """Notes of the form ``FILE: text``, one per text with its files named together."""
+    files: dict[str, list[str]] = {}
+    for note in notes:
+        source, sep, text = note.partition(": ")
+        key = text if sep else note
+        files.setdefault(key, [])
+        if sep and source not in files[key]:
+            files[key].append(source)
+    return [(f"{', '.join(names)}: {text}" if names else text) for text, names in files.items()]
 
 
 def _glitches(resid: np.ndarray, bad: np.ndarray, mad: np.ndarray, threshold: float) -> np.ndarray:
@@ -524,17 +566,37 @@ def clean(
                              f"{restarts.size + 1} parts (its time goes back {restarts.size} "
                              "time(s))")  # fmt: skip
         return segments, report
+    for values, names in ((x, state_names), (u, input_names)):
+        empty = [n for j, n in enumerate(names) if t.size and not np.isfinite(values[:, j]).any()]
+        if empty:
+            raise ValueError(f"column(s) {empty} hold no numbers (every cell empty or "
+                             "not finite)")  # fmt: skip
     report = CleanReport(rows_in=t.size)
+    resolution = logged_resolution(t)  # of the raw stamps: float32 or rounded ones
+    ahead = np.isfinite(t)
+    if ahead.any():  # epoch seconds (1.7e9 s: float64 steps of 2.4e-7 s): from the first
+        step = np.median(np.abs(np.diff(t[ahead]))) if ahead.sum() > 1 else 0.0
+        if np.spacing(np.max(np.abs(t[ahead]))) > 1e-9 * step:
+            t = t - t[ahead][0]
+    ahead = np.isfinite(t)
+    if np.any(np.diff(t[ahead]) < 0):  # out of order by less than a restart: sort
+        order = np.argsort(np.where(ahead, t, np.inf), kind="stable")
+        report.reordered = int(np.count_nonzero(order != np.arange(t.size)))
+        t, x, u = t[order], x[order], u[order]
+    report.held_inputs = _hold_inputs(t, u, [n in measured for n in input_names], gap_factor)
     twice = np.zeros(t.size, dtype=bool)
     twice[1:] = (
         (t[1:] == t[:-1]) & np.all(x[1:] == x[:-1], axis=1) & np.all(u[1:] == u[:-1], axis=1)
     )
     t, x, u = t[~twice], x[~twice], u[~twice]
+    wrapped = []
     for j, name in enumerate(state_names):
         ok = np.isfinite(x[:, j])
         if name in angles and ok.sum() > 1:
             unwrapped = np.unwrap(x[ok, j])
-            report.unwrapped += int(np.count_nonzero(np.abs(np.diff(unwrapped - x[ok, j])) > 1.0))
+            jumps = int(np.count_nonzero(np.abs(np.diff(unwrapped - x[ok, j])) > 1.0))
+            report.unwrapped += jumps
+            wrapped += [name] if jumps else []
             x[ok, j] = unwrapped
     finite_x = np.isfinite(x).all(axis=1)
     finite = np.isfinite(t) & finite_x & np.isfinite(u).all(axis=1)
@@ -614,10 +676,16 @@ def clean(
             for j in range(xp.shape[1]):
                 xp[missing, j] = np.interp(tp[missing], tp[~missing], xp[~missing, j])
             report.bridged += int(missing.sum())
-        seg = Trajectory(t[part], xp, u[part], state_names, input_names, missing=missing,
+        stamps = t[part]
+        tp = _regular_grid(stamps, resolution)
+        report.regular += int(tp is not stamps)
+        seg = Trajectory(tp, xp, u[part], state_names, input_names, missing=missing,
                          measured=tuple(measured))  # fmt: skip
+        if wrapped:  # in radians: a log wraps an angle at +-pi
+            seg.meta["unwrapped"] = list(wrapped)
         segments.append(seg)
-        dev = np.abs(seg.steps / median - 1.0).max() if median else 0.0
+        own = float(np.median(seg.steps)) if len(seg) > 1 else median
+        dev = np.abs(seg.steps / own - 1.0).max() if own else 0.0
         report.jitter = max(report.jitter, float(dev))
     if not segments:
         raise ValueError(
@@ -627,6 +695,64 @@ def clean(
     report.segments = len(segments)
     report.rows_out = int(sum(len(s) for s in segments))
     return segments, report
+
+
+def _hold_inputs(t: np.ndarray, u: np.ndarray, measured: Sequence[bool], longest: float) -> int:
+    """Fills runs of empty (NaN) input cells in place; returns how many were filled.
+
+    An input logged at a lower rate than the states (an asynchronous log merged on one time
+    axis: a trial's 50 Hz commands beside 100 Hz states, every other cell empty) would
+    otherwise drop every other row, and the log fell apart into pieces too short to fit. A
+    held input (a command) keeps the value of the row before until the next; a measured one
+    is interpolated in time. Runs longer than ``longest`` rows (a dropout, not a rate), and
+    cells before the first value or (measured) after the last, stay empty.
+    """
+    filled = 0
+    ok_t = np.isfinite(t)
+    for j, is_measured in enumerate(measured):
+        empty = np.isnan(u[:, j]) & ok_t
+        if not empty.any() or empty.all():
+            continue
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], empty.astype(int), [0]])))
+        fill = np.zeros(t.size, dtype=bool)
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            inside = a > 0 and (b < t.size or not is_measured)
+            if inside and b - a <= longest and np.isfinite(u[a - 1, j]):
+                fill[a:b] = True
+        if not fill.any():
+            continue
+        known = np.flatnonzero(np.isfinite(u[:, j]) & ok_t)
+        if is_measured:
+            u[fill, j] = np.interp(t[fill], t[known], u[known, j])
+        else:  # the value of the latest row before with one
+            last = np.maximum.accumulate(np.where(np.isfinite(u[:, j]), np.arange(t.size), 0))
+            u[fill, j] = u[last[fill], j]
+        filled += int(fill.sum())
+    return filled
+
+
+def _regular_grid(t: np.ndarray, resolution: float) -> np.ndarray:
+    """A segment's stamps as a regular grid where their steps vary only by the resolution.
+
+    Stamps stored as float32 (a step of 1e-3 s at t = 1e4 s) or rounded to a few decimals
+    vary by their resolution though the clock was regular; each row's own step then made
+    up jitter of 10 % and a trial got 12 terms for 7 (float32 stamps at 1e4 s). Where every
+    step is within two resolutions of the median step (both ends rounded), the stamps are
+    the least-squares line through them; else (a real jitter, a gap) they are kept.
+    """
+    if t.size < 3:
+        return t
+    steps = np.diff(t)
+    median = float(np.median(steps))
+    spread = float(np.max(np.abs(steps - median)))
+    tiny = 8 * float(np.spacing(np.max(np.abs(t))))
+    if not (median > 0 and 1e-9 * median < spread <= 2 * resolution + tiny):
+        return t
+    if resolution < 1e-7 * median:  # float64 round-off: nothing to repair
+        return t
+    k = np.arange(t.size, dtype=np.float64)
+    slope, start = np.polyfit(k, t, 1)
+    return start + slope * k
 
 
 def _time_restarts(t: np.ndarray, gap_factor: float) -> np.ndarray:
@@ -700,8 +826,8 @@ def resolve_names(
     cols = list(columns)
     if time not in cols:
         raise ValueError(
-            f"no time column {time!r} among the columns {cols} (name it with --time; time= "
-            "in Python)"
+            f"no time column {time!r} among the columns {cols} (name it with --time, or "
+            "rename the columns with --columns; time=, columns= in Python)"
         )
     if len(set(cols) - {"_"}) != len([c for c in cols if c != "_"]):
         raise ValueError(f"duplicate column names in {cols}")
@@ -709,14 +835,14 @@ def resolve_names(
         raise ValueError(f"unknown system {system!r}; valid choices: {', '.join(PRESET_VARIABLES)}")
     if system is not None and states is None and inputs is None:
         known_s, known_i = PRESET_VARIABLES[system]
-        unknown = [c for c in cols if c not in {*known_s, *known_i, time} and not _ignored(c)]
-        if unknown:
-            valid = [time, *known_s, *known_i, "_", "*_ref", "*_cmd"]
-            raise ValueError(f"unknown column name(s) {unknown}; valid names: {valid}")
         absent = [c for c in (*known_s, *known_i) if c not in cols]
-        if absent:
+        if absent:  # other columns are left out (a counter, a flag, an exporter's index)
+            unknown = [c for c in cols if c not in {*known_s, *known_i, time}
+                       and not _ignored(c)]  # fmt: skip
+            hint = (f"; the columns {unknown} are not its names: rename them with --columns "
+                    "(columns= in Python)" if unknown else "")  # fmt: skip
             raise ValueError(f"no column(s) {absent} (the {system} preset needs them); columns "
-                             f"are {cols}")  # fmt: skip
+                             f"are {cols}{hint}")  # fmt: skip
         st, inp = list(known_s), list(known_i)
     else:
         candidates = [c for c in cols if c != time and not _ignored(c)]
@@ -799,13 +925,14 @@ def _read_table(
     inputs: Sequence[str] | None,
     time: str,
     time_unit: float = 1.0,
+    notes: list[str] | None = None,
 ) -> tuple[list[str], np.ndarray, list[str], list[str]]:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such data file: {path}")
     wanted = [c for c in (time, *(states or ()), *(inputs or ())) if c]
     if path.suffix.lower() in (*PARQUET_SUFFIXES, ".npz"):
-        table = read_table(path, time=time, time_unit=time_unit, required=wanted)
+        table = read_table(path, time=time, time_unit=time_unit, required=wanted, notes=notes)
         names = list(table)
         if not names or not len(table[names[0]]):
             raise ValueError(f"{path} has no rows of numeric columns")
@@ -816,15 +943,27 @@ def _read_table(
             table = dict(zip(columns, table.values(), strict=True))
             names = list(columns)
     else:
-        table = _read_csv_columns(path, columns, wanted, time, time_unit)
+        table = _read_csv_columns(path, columns, wanted, time, time_unit, notes)
         names = list(table)
     data = np.column_stack(list(table.values())) if names else np.zeros((0, 0))
+    if not len(data):
+        raise ValueError(f"{path} has a header but no rows")
     st, inp = resolve_names(names, system, states, inputs, time)
+    if notes is not None and system is not None and states is None and inputs is None:
+        other = [c for c in names if c not in {*st, *inp, time} and not _ignored(c)]
+        if other:
+            shown = [c if c else "(unnamed)" for c in other]
+            notes.append(f"column(s) {shown} are not the {system} preset's: left out")
     return names, data, st, inp
 
 
 def _read_csv_columns(
-    path: Path, columns: Sequence[str] | None, wanted: Sequence[str], time: str, time_unit: float
+    path: Path,
+    columns: Sequence[str] | None,
+    wanted: Sequence[str],
+    time: str,
+    time_unit: float,
+    notes: list[str] | None = None,
 ) -> dict[str, np.ndarray]:
     """A CSV file's numeric columns (the delimiter, a header, quotes, a BOM found as written)."""
     import pyarrow as pa
@@ -858,8 +997,10 @@ def _read_csv_columns(
         table = pcsv.read_csv(path, read_options=options,
                               parse_options=pcsv.ParseOptions(delimiter=delimiter))  # fmt: skip
     except (OSError, pa.ArrowInvalid) as exc:
+        if "Could not skip initial" in str(exc):  # a header and no line after it
+            raise ValueError(f"{path} has a header but no rows") from None
         raise ValueError(f"{path}: not a numeric CSV ({exc})") from None
-    out = _float_columns(table, path, wanted, time, time_unit)
+    out = _float_columns(table, path, wanted, time, time_unit, notes)
     return {("_" if c.startswith("_") and c[1:].isdigit() else c): v for c, v in out.items()}
 
 
@@ -871,14 +1012,43 @@ def _is_number(text: str) -> bool:
     return True
 
 
+BAD_CELLS = 0.05
+"""A text column is read as numbers, its other cells as missing, where at most this share of
+its filled cells are not numbers (a ``-`` or ``#VALUE!`` in a numeric log)."""
+
+
+def _numbers_in_text(column: Any) -> tuple[np.ndarray, list[str]]:
+    """A text column's cells as floats (NaN where empty or not a number), and the others."""
+    values = np.full(len(column), np.nan)
+    bad: list[str] = []
+    for k, cell in enumerate(column.to_pylist()):
+        text = "" if cell is None else str(cell).strip()
+        if not text:
+            continue
+        try:
+            values[k] = float(text)
+        except ValueError:
+            bad.append(text)
+    return values, bad
+
+
 def _float_columns(
-    table: Any, path: Path, required: Sequence[str], time: str | None, time_unit: float
+    table: Any,
+    path: Path,
+    required: Sequence[str],
+    time: str | None,
+    time_unit: float,
+    notes: list[str] | None = None,
 ) -> dict[str, np.ndarray]:
     """An Arrow table's columns as float64 arrays; text columns left out unless required.
 
     Timestamps become seconds since the earliest one (exact in int64 ns: float64 seconds since
     1970 would round the steps). A numeric ``time`` column is converted by ``time_unit``
-    (seconds per unit) from its earliest value. Empty cells are NaN.
+    (seconds per unit) from its earliest value. Empty cells are NaN. A text column whose
+    filled cells are numbers but for :data:`BAD_CELLS` of them is numeric, the others read
+    as missing (a trial's single ``-`` cell made ``z_dot`` a text column, left out without a
+    word: a model without it, exit 0); numbers written with decimal commas are refused by
+    name. What was changed is appended to ``notes``.
     """
     import pyarrow as pa
     import pyarrow.compute as pc
@@ -904,11 +1074,30 @@ def _float_columns(
         try:
             values = column.to_numpy(zero_copy_only=False).astype(np.float64)
         except (TypeError, ValueError, pa.ArrowInvalid):
-            if name in required:
-                raise ValueError(
-                    f"{path}: column {name!r} is not numeric (e.g. {column[0].as_py()!r})"
-                ) from None
-            continue  # a text column nobody asked for (a flight-mode label)
+            if not pa.types.is_string(column.type) and not pa.types.is_large_string(column.type):
+                if name in required:
+                    raise ValueError(f"{path}: column {name!r} is not numeric (of type "
+                                     f"{column.type})") from None  # fmt: skip
+                continue
+            values, bad = _numbers_in_text(column)
+            filled = len(bad) + int(np.sum(np.isfinite(values) | np.isinf(values)))
+            comma = [b for b in bad if re.fullmatch(r"[-+]?\d*,\d+([eE][-+]?\d+)?", b)]
+            if comma and len(comma) > BAD_CELLS * filled:
+                raise ValueError(f"{path}: column {name!r} holds numbers written with decimal "
+                                 f"commas (e.g. {comma[0]!r}): write them with decimal "
+                                 "points") from None  # fmt: skip
+            if not bad or len(bad) > BAD_CELLS * filled:
+                if name in required:
+                    example = bad[0] if bad else column[0].as_py()
+                    raise ValueError(f"{path}: column {name!r} is not numeric (e.g. "
+                                     f"{example!r})") from None  # fmt: skip
+                if notes is not None:
+                    notes.append(f"text column {name!r} left out")
+                continue  # a text column nobody asked for (a flight-mode label)
+            if notes is not None:
+                shown = ", ".join(repr(b) for b in dict.fromkeys(bad[:20]))
+                notes.append(f"{len(bad)} cell(s) of column {name!r} that are not numbers "
+                             f"({shown}) read as missing")  # fmt: skip
         out[name] = values * scale
     return out
 
@@ -924,6 +1113,7 @@ def read_table(
     time: str | None = None,
     time_unit: float = 1.0,
     required: Sequence[str] = (),
+    notes: list[str] | None = None,
 ) -> dict[str, np.ndarray]:
     """Reads a parquet, CSV or NPZ file into float64 columns.
 
@@ -938,6 +1128,7 @@ def read_table(
             when that is not 1 (seconds per unit: 1e-3 for milliseconds).
         time_unit: Seconds per unit of a numeric ``time`` column.
         required: Columns that must be numeric where present (a text one raises, naming it).
+        notes: Where given, what reading changed is appended (:func:`_float_columns`).
 
     Returns:
         Column name -> 1-D float array.
@@ -973,7 +1164,7 @@ def read_table(
             )
     except (OSError, pa.ArrowInvalid) as exc:  # unreadable, or not that format inside
         raise ValueError(f"{path}: cannot read the log ({exc})") from None
-    return _float_columns(table, path, [*(columns or ()), *required], time, time_unit)
+    return _float_columns(table, path, [*(columns or ()), *required], time, time_unit, notes)
 
 
 def is_npz_archive(path: str | Path) -> bool:
@@ -1052,7 +1243,9 @@ def read_log(
     Returns:
         Clean segments and the report.
     """
-    cols, data, st, inp = _read_table(path, columns, system, states, inputs, time, time_unit)
+    notes: list[str] = []
+    cols, data, st, inp = _read_table(path, columns, system, states, inputs, time, time_unit,
+                                      notes)  # fmt: skip
     if angle_unit != 1.0:
         data = data.copy()
         for name in set(angles) & set(st):
@@ -1063,6 +1256,7 @@ def read_log(
     )  # fmt: skip
     for seg in segs:
         seg.meta["source"] = str(path)
+    report.notes = [*(f"{Path(path).name}: {note}" for note in notes), *report.notes]
     return segs, report
 
 

@@ -436,6 +436,15 @@ def check_identifiable(
     names = list(feature_names)
     p = len(names)
     if gram.rows < p:
+        rows = sum(len(t) for t in trajs or ())
+        unseen = sum(int(np.sum(~t.observed)) for t in trajs or ())
+        if unseen > rows // 3:  # states logged at a lower rate than the inputs
+            raise ValueError(
+                f"only {gram.rows} regression rows for a library of {p} terms: {unseen} of "
+                f"{rows} rows hold no states, and a row of the fit needs the states at both "
+                "ends of a step; log the states at the inputs' rate, or keep only the rows "
+                "that hold them"
+            )
         raise ValueError(
             f"only {gram.rows} regression rows for a library of {p} terms: record at least "
             f"{p - gram.rows} more samples, or use a smaller library"

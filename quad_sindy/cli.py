@@ -378,7 +378,10 @@ def identify(
         WINDOWS,
         data_warnings,
         input_shift_note,
+        long_enough,
+        long_run_ratio,
         select_model,
+        state_shift_note,
         typical_length,
     )
 
@@ -516,10 +519,14 @@ def identify(
                     typer.echo(library_note)
                 notes = data_warnings(trajs, lib)  # select_model reports them itself
                 if method in ("rk4", "forward"):
-                    ones = [1.0] * len(first.state_names)  # no long-run ratio: white residuals
-                    names = list(model.feature_names)
-                    xi = model.coefficients
-                    notes.append(input_shift_note(trajs, names, config.window, xi, ones))
+                    names, xi = list(model.feature_names), model.coefficients
+                    ratio = long_run_ratio(
+                        long_enough(trajs, config.window), names, xi, config.window
+                    )
+                    notes.append(
+                        input_shift_note(trajs, names, config.window, xi, ratio)
+                        or state_shift_note(trajs, names, config.window, xi, ratio)
+                    )
                 for note in filter(None, notes):
                     typer.echo(f"warning: {note}")
     except (ValueError, FileNotFoundError) as exc:
@@ -531,6 +538,7 @@ def identify(
         model.meta["input_shift"] = input_shift
     # how the logs were read: score reads held-out logs the same way by default
     model.meta["units"] = {"time": time_unit.value, "angles": angle_unit.value}
+    model.meta["time_column"] = time
     model.save(out)
     typer.echo("\n".join(model.equations()))
     typer.echo(f"wrote {out}")
@@ -541,7 +549,9 @@ def score(
     model: Annotated[Path, typer.Argument(help="identified model JSON")],
     data: Annotated[list[Path], typer.Argument(help="held-out CSV, parquet or NPZ files")],
     seconds: Annotated[float, typer.Option(help="prediction horizon [s]")] = 1.0,
-    time: Annotated[str, typer.Option(help="time column")] = "t",
+    time: Annotated[
+        str | None, typer.Option(help="time column (default: as the model was trained)")
+    ] = None,
     time_unit: Annotated[
         TimeUnit | None,
         typer.Option(help="unit of a numeric time column (default: as the model was trained)"),
@@ -573,16 +583,27 @@ def score(
         data_warnings,
         held_out_errors,
         input_shift_note,
+        long_enough,
+        long_run_ratio,
         range_note,
+        state_shift_note,
         trig_variables,
     )
 
     if not (math.isfinite(seconds) and seconds > 0):
         _fail(f"--seconds must be a positive number, got {seconds:g}")
+    unit_hint = ""
     try:
         loaded = load_model(model)
         angles = sorted(trig_variables(loaded.feature_names) & set(loaded.state_names))
         units = _trained_units(loaded, model, time_unit, angle_unit)
+        if units["time"] != "s":  # a log in seconds read in ms or us has few long steps
+            unit_hint = (f" (the logs are read in the model's time unit, {units['time']}: "
+                         "--time-unit s if they are in seconds)")  # fmt: skip
+        if time is None:  # the training logs' time column (models before 2026-11-26: t)
+            time = loaded.meta.get("time_column", "t")
+            if not isinstance(time, str) or not time:
+                _fail(f"{model}: time_column must be a column name, got {time!r}")
         trajs, cleaning = load_data(
             data, states=loaded.state_names, inputs=loaded.input_names, time=time,
             angles=angles, measured=loaded.meta.get("measured_inputs", ()),
@@ -605,21 +626,25 @@ def score(
                   "score logs of one sample step at a time")  # fmt: skip
         dt = periods[len(periods) // 2]
         if not seconds / dt < 1e9:
-            _fail(f"--seconds {seconds:g} is {seconds / dt:.3g} steps of {dt:g} s: too many")
+            _fail(f"--seconds {seconds:g} is {seconds / dt:.3g} steps of {dt:g} s: too "
+                  f"many{unit_hint}")  # fmt: skip
         steps = int(round(seconds / dt))
         if steps < 1 or abs(steps * dt - seconds) > 0.25 * seconds:
             _fail(f"--seconds {seconds:g} is not a whole number of the logs' {dt:g} s steps "
                   f"(nearest: {max(steps, 1) * dt:g} s)")  # fmt: skip
         result = held_out_errors(loaded, trajs, steps)
     except (ValueError, FileNotFoundError) as exc:
-        _fail(str(exc).splitlines()[0] if str(exc) else repr(exc))
+        text = str(exc).splitlines()[0] if str(exc) else repr(exc)
+        _fail(text + (unit_hint if "steps" in text else ""))
     if cleaning.changed:
         typer.echo(f"data: {cleaning.summary()}")
     window = loaded.meta.get("window", 1)
     window = window if isinstance(window, int) and not isinstance(window, bool) else 1
-    ones = [1.0] * len(loaded.state_names)
-    late = input_shift_note(trajs, list(loaded.feature_names), max(window, 1),
-                            loaded.coefficients, ones, command="score again")  # fmt: skip
+    names, window = list(loaded.feature_names), max(window, 1)
+    ratio = long_run_ratio(long_enough(trajs, window), names, loaded.coefficients, window)
+    late = input_shift_note(trajs, names, window, loaded.coefficients, ratio,
+                            command="score again")  # fmt: skip
+    late = late or state_shift_note(trajs, names, window, loaded.coefficients, ratio)
     for note in [*data_warnings(trajs, loaded.feature_names), range_note(loaded, trajs), late]:
         if note:
             typer.echo(f"warning: {note}")

@@ -206,6 +206,10 @@ def test_identify_takes_the_time_column_a_log_names(monkeypatch, capsys, tmp_pat
         models.append(load_model(out))
     assert "time" not in models[1].state_names
     np.testing.assert_array_equal(models[0].coefficients, models[1].coefficients)
+    # score reads held-out logs by the model's time column (it asked for --time again)
+    code, out, err = run_cli(monkeypatch, capsys, "score", str(tmp_path / "g.json"),
+                             str(renamed))  # fmt: skip
+    assert code in (0, None) and "score (" in out, err
 
 
 def test_training_on_an_env_that_is_not_a_quadrotor_is_one_line_and_leaves_no_folder(

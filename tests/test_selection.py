@@ -578,6 +578,32 @@ def test_a_wrapped_angle_is_unwrapped_and_reported(other_clean, tmp_path):
     assert check.exact_support, (check.missed, check.spurious)
 
 
+def test_a_frozen_sensor_file_is_named_and_a_radian_spin_is_not_called_degrees(other_clean):
+    """A file whose z holds one value while it moves in the others (a trial: a frozen sensor
+    gave `z' = 0.2095 y_dot` with exit 0, the notes blaming outliers) is named. An angle the
+    log wrapped at +-pi is in radians: a spinning flight unwrapped to 19 rad is not called a
+    log in degrees (the note fired on every identify and score)."""
+    from identification.selection import data_warnings
+
+    frozen = [dataclasses.replace(t, meta={"source": f"f{i}.csv"}) for i, t in
+              enumerate(other_clean)]  # fmt: skip
+    frozen[1] = dataclasses.replace(frozen[1], x=frozen[1].x.copy())
+    frozen[1].x[:, 1] = 1.0
+    notes = data_warnings(frozen, planar_library())
+    assert any(n.startswith("z holds one value (1) over all of f1.csv") for n in notes), notes
+    assert not any("holds one value" in n for n in data_warnings(other_clean, planar_library()))
+    tr = other_clean[0]
+    x = tr.x.copy()
+    x[:, 2] += np.linspace(0.0, 6 * np.pi, len(tr))  # three turns
+    spun = [Trajectory(tr.t, x, tr.u, PS, PI)]
+    assert any(n.startswith("phi reaches") and "inside sin/cos" in n
+               for n in data_warnings(spun, planar_library()))  # fmt: skip
+    x[:, 2] = np.angle(np.exp(1j * x[:, 2]))  # logged wrapped to (-pi, pi]
+    segs, report = clean(tr.t, x, tr.u, PS, PI, angles=("phi",))
+    assert report.unwrapped >= 3 and np.ptp(segs[0].x[:, 2]) > 6 * np.pi - 0.5
+    assert not any("inside sin/cos" in n for n in data_warnings(segs, planar_library()))
+
+
 def test_a_row_written_twice_is_removed_without_splitting_the_log(other_clean):
     tr = other_clean[0]
     keep = np.insert(np.arange(len(tr)), 300, 299)  # row 299 written twice
@@ -721,6 +747,117 @@ def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
         assert (report.nonfinite_rows, report.bridged) == (1, 1)
     else:
         assert np.array_equal(segs[0].x, tr.x)
+
+
+@pytest.mark.parametrize(
+    "variant", ["text_cell", "decimal_comma", "unsorted", "half_rate_input", "extra_columns",
+                "header_only", "empty_column"],
+)  # fmt: skip
+def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
+    other_clean, tmp_path, variant
+):
+    """What a trial's real-log exports did (each gave a wrong model with exit 0, a false
+    refusal or a message that named the wrong thing): a '-' cell made a column text, left
+    out without a word; decimal commas; rows written out of time order (dropped as stale);
+    50 Hz commands beside 100 Hz states, every other input cell empty (refused); columns the
+    preset does not name (refused); a header without rows; an empty column."""
+    tr = other_clean[0]
+    text = _csv_text(tr)
+    lines = text.split("\n")
+    if variant == "text_cell":
+        cells = lines[301].split(",")
+        cells[5] = "-"  # z_dot
+        lines[301] = ",".join(cells)
+    elif variant == "decimal_comma":
+        lines = [lines[0].replace(",", ";")] + [
+            ";".join(repr(v).replace(".", ",") for v in row)
+            for row in np.column_stack([tr.t, tr.x, tr.u]).tolist()
+        ]
+    elif variant == "unsorted":
+        lines[101], lines[102] = lines[102], lines[101]
+    elif variant == "half_rate_input":
+        for k in range(2, len(lines), 2):
+            cells = lines[k].split(",")
+            lines[k] = ",".join(cells[:-2] + ["", ""])
+    elif variant == "extra_columns":
+        lines = [lines[0] + ",armed,"] + [ln + ",1," for ln in lines[1:]]
+    elif variant == "header_only":
+        lines = lines[:1]
+    elif variant == "empty_column":
+        lines = [",".join(ln.split(",")[:6] + [""] + ln.split(",")[7:]) if k else ln
+                 for k, ln in enumerate(lines)]  # fmt: skip
+    path = tmp_path / "log.csv"
+    path.write_text("\n".join(lines), encoding="utf-8")
+    refused = {"decimal_comma": r"column 't' holds numbers written with decimal commas "
+                                r"\(e\.g\. '0,0'\)",
+               "header_only": "has a header but no rows",
+               "empty_column": r"column\(s\) \['phi_dot'\] hold no numbers"}  # fmt: skip
+    if variant in refused:
+        with pytest.raises(ValueError, match=refused[variant]):
+            load_data([path], system="planar")
+        return
+    segs, report = load_data([path], system="planar")
+    summary = report.summary()
+    assert segs[0].state_names == PS and segs[0].input_names == PI
+    if variant == "text_cell":  # the column kept, the cell missing (bridged)
+        assert report.bridged == 1
+        assert "1 cell(s) of column 'z_dot' that are not numbers ('-') read as missing" in summary
+    elif variant == "unsorted":
+        assert report.reordered == 2 and report.stale_rows == 0
+        assert np.array_equal(segs[0].x, tr.x) and np.array_equal(segs[0].t, tr.t)
+    elif variant == "half_rate_input":
+        held = len(tr) // 2
+        assert report.held_inputs == 2 * held and len(segs) == 1 and len(segs[0]) == len(tr)
+        np.testing.assert_array_equal(segs[0].u[1::2], tr.u[0:-1:2])  # the row before's
+    elif variant == "extra_columns":
+        assert "column(s) ['armed', '(unnamed)'] are not the planar preset's" in summary
+        assert np.array_equal(segs[0].x, tr.x)
+
+
+def test_stamp_noise_is_told_from_irregular_sampling_by_the_data():
+    """Jittery stamps are either samples at irregular times (each row's own step is right)
+    or a regular clock stamped with noise (a trial: +-1 ms on an exact 10 ms clock gave 324
+    "outlying steps" and a misfit note). A fit of the whole library tells them apart: the
+    noisy stamps are read as a regular clock and said, the irregular samples are kept."""
+    from identification.experiments.truth import model_from_truth
+    from identification.selection import stamp_jitter
+
+    truth, rng = model_from_truth("planar"), np.random.default_rng(4)
+    sampled, stamped = [], []
+    for _ in range(3):
+        u = np.array([0.18 * 9.81, 0.0]) + rng.normal(0, [0.3, 2e-3], size=(400, 2))
+        x0 = np.array([0.0, 1.0, 0.05, 0.1, 0.0, 0.2])
+        steps = 0.01 * (1 + 0.3 * rng.uniform(-1, 1, size=399))  # irregular, stamped exactly
+        t = np.concatenate([[0.0], np.cumsum(steps)])
+        sampled.append(Trajectory(t, truth.simulate(x0, u[:-1], steps), u, PS, PI))
+        x = truth.simulate(x0, u[:-1], 0.01)  # a regular clock, stamped with noise
+        noisy = 0.01 * np.arange(400) + rng.uniform(-1e-3, 1e-3, 400)
+        stamped.append(Trajectory(noisy, x, u, PS, PI))
+    kept, note = stamp_jitter(sampled, planar_library())
+    assert note is None and all(k is s for k, s in zip(kept, sampled, strict=True))
+    regular, note = stamp_jitter(stamped, planar_library())
+    assert note and note.startswith("the time stamps jitter (up to 0.001")
+    for tr in regular:
+        np.testing.assert_allclose(np.diff(tr.t), 0.01, rtol=2e-3)
+        assert np.ptp(np.diff(tr.t)) < 1e-12
+
+
+def test_float32_time_stamps_are_read_as_the_regular_clock_they_round(other_clean, tmp_path):
+    """Time stored as float32 at t = 1e4 s rounds every stamp to 1e-3 s; each row's own step
+    then jittered 10 % and a trial got 12 terms for 7. Steps that vary only by the stamps'
+    resolution are read as a regular grid, and the model is exact again."""
+    paths = []
+    for i, tr in enumerate(other_clean):
+        stamps = (1e4 + tr.t).astype(np.float32).astype(np.float64)
+        assert np.ptp(np.diff(stamps)) > 5e-4  # the rounding's jitter
+        paths.append(write_trajectory_csv(tmp_path / f"f{i}.csv",
+                                          Trajectory(stamps, tr.x, tr.u, PS, PI)))  # fmt: skip
+    segs, report = load_data(paths, system="planar")
+    assert report.regular == 3 and "as a regular grid" in report.summary()
+    for seg in segs:
+        assert np.ptp(np.diff(seg.t)) < 1e-9 and abs(np.median(np.diff(seg.t)) - 0.01) < 2e-6
+    model, _ = select_model(segs, planar_library(), **FAST)
+    assert check_support(model, truth_planar(OTHER_PLANAR)).exact_support
 
 
 def test_time_unit_restarts_and_mixed_units_between_files(other_clean, tmp_path):
@@ -1899,6 +2036,41 @@ def test_inputs_logged_a_row_late_are_named_and_input_shift_undoes_them(tmp_path
     kept, note = _shifted([late[0].slice(0, 4), *late], 2)
     assert len(kept) == 3 and note == "; 1 segment(s) too short for the shift left out"
     assert [len(k) for k in kept] == [len(t) - 2 for t in late]
+
+
+def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inputs(
+    tmp_path, other_clean
+):
+    """A state estimator's velocity estimates lag its positions (a trial's Kalman filter:
+    about 2 rows); the selection builds the lag into the model (input terms in `y'`) with no
+    input misaligned. The lagging column is named, with the shift that aligns it, and the
+    input-shift check stays quiet: `score` named an input shift on such a model that only
+    one equation gained by and the others lost far more (following it made the score 30
+    times worse)."""
+    from identification.selection import input_shift_note, long_run_ratio, state_shift_note
+
+    lagged = []
+    for tr in other_clean:  # y_dot logged 2 rows late
+        x = tr.x.copy()
+        x[2:, 3] = tr.x[:-2, 3]
+        lagged.append(Trajectory(tr.t[2:], x[2:], tr.u[2:], PS, PI))
+    model, report = select_model(lagged, planar_library(), **FAST)
+    named = [w for w in report.warnings if "fit the data better with" in w]
+    assert len(named) == 1 and "with y_dot taken 2 row(s) later" in named[0], named
+    assert "inputs taken" not in named[0]
+    # aligned data: nothing is named
+    _, report = select_model(other_clean, planar_library(), **FAST)
+    assert not any("fit the data better" in w for w in report.warnings), report.warnings
+    # an input shift that helps one equation but costs others more is not named
+    names, xi, w = list(model.feature_names), model.coefficients, model.meta["window"]
+    ratio = long_run_ratio(lagged, names, xi, w)
+    assert input_shift_note(lagged, names, w, xi, ratio) is None
+    assert "y_dot taken 2 row(s) later" in state_shift_note(lagged, names, w, xi, ratio)
+    model.save(tmp_path / "m.json")
+    paths = [str(write_trajectory_csv(tmp_path / f"a{i}.csv", t))
+             for i, t in enumerate(other_clean)]  # fmt: skip
+    shown = CliRunner().invoke(app, ["score", str(tmp_path / "m.json"), *paths])
+    assert shown.exit_code == 0 and "inputs taken" not in shown.output, shown.output
 
 
 def test_a_grown_term_that_fits_the_noise_bias_is_dropped_and_a_real_one_kept(other_clean):
