@@ -1396,6 +1396,7 @@ def select_model(
         raise ValueError(_empty_model_message(candidates, report.hold))
     shifted = input_shift_note(used, names, best.window, xi, ratio)
     shifted = shifted or state_shift_note(used, names, best.window, xi, ratio)
+    shifted = shifted or angle_offset_note(xi, names, first.state_names)
     if shifted:  # before the notes it causes (outlying steps, misfit)
         report.warnings.append(shifted)
     if base.derivative in ("rk4", "forward"):
@@ -1834,6 +1835,57 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
         if name in inside and jump > 0.9 * 2 * np.pi
     ]
     return notes
+
+
+OFFSET_LIMIT = 0.3
+"""Largest rotation [rad] :func:`angle_offset_note` reads as an angle's offset."""
+
+
+def angle_offset_note(
+    xi: np.ndarray, names: Sequence[str], state_names: Sequence[str]
+) -> str | None:
+    """A note where two equations rotate the same factor by one angle's common offset.
+
+    A logged angle with a constant offset b (an IMU's mounting, an estimator's bias) turns
+    ``sin(phi) u1`` into ``cos(b) sin(phi) u1 - sin(b) cos(phi) u1``: a trial's 0.01 rad
+    gave ``y_dot' = -0.5555 sin(phi) u1 + 0.005555 cos(phi) u1`` and its twin in ``z_dot'``
+    (all P = 1.00) with no note; the model is right for logs with that offset, 2.1 % of the
+    range off at 1 s on flights without it. In an equation holding ``c_s sin(a) X + c_c
+    cos(a) X`` the pair is a sine shifted by atan2(c_c, c_s); where two equations or more
+    agree on that shift up to quarter turns (the physics' phases), by at most
+    :data:`OFFSET_LIMIT`, the angle is named with it: an offset, or an axis tilted by it.
+    """
+    found: dict[tuple[str, str], list[tuple[str, float]]] = {}
+    for i, state in enumerate(state_names):
+        pairs: dict[tuple[str, str], dict[str, float]] = {}
+        for j in np.flatnonzero(xi[i]):
+            term = parse_term(names[j])
+            trig = [f for f in term if f.kind in ("sin", "cos") and f.k == 1]
+            if len(trig) != 1 or sum(f.var == trig[0].var for f in term) != 1:
+                continue
+            rest = term_name(tuple(f for f in term if f is not trig[0]))
+            pairs.setdefault((trig[0].var, rest), {})[trig[0].kind] = float(xi[i, j])
+        for key, both in pairs.items():
+            if len(both) == 2:
+                turn = -np.arctan2(both["cos"], both["sin"])
+                shift = (turn + np.pi / 4) % (np.pi / 2) - np.pi / 4
+                found.setdefault(key, []).append((state, float(shift)))
+    for (angle, factor), seen in found.items():
+        shifts = np.array([b for _, b in seen])
+        small = np.abs(shifts)
+        if len(seen) < 2 or not (1e-4 < small.min() and small.max() < OFFSET_LIMIT):
+            continue
+        if np.ptp(shifts) > max(0.1 * np.abs(shifts).min(), 1e-4):
+            continue
+        offset = float(np.mean(shifts))
+        where = " and ".join(f"{state}'" for state, _ in seen)
+        return (
+            f"{where} hold sin({angle}) {factor} and cos({angle}) {factor} together as one "
+            f"sine shifted by {offset:.4g} rad: the logged {angle} may be offset by "
+            f"{offset:.4g} rad (an IMU's mounting, an estimator's bias; subtract it and "
+            f"identify again), or the vehicle's axis is tilted by it"
+        )
+    return None
 
 
 STAMP_JITTER = 1e-3

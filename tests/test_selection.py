@@ -2073,6 +2073,22 @@ def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inpu
     assert shown.exit_code == 0 and "inputs taken" not in shown.output, shown.output
 
 
+def test_an_angle_logged_with_an_offset_is_named_with_it(other_clean):
+    """A roll logged 0.01 rad off (an IMU's mounting): the model rotates the thrust by it,
+    `sin(phi) u1` and `cos(phi) u1` in both `y_dot'` and `z_dot'` (all P = 1.00, no note in
+    a trial). The common shift is named; flights without an offset get no such note."""
+    offset = [Trajectory(t.t, t.x + [0, 0, 0.01, 0, 0, 0], t.u, PS, PI) for t in other_clean]
+    model, report = select_model(offset, planar_library(), **FAST)
+    rows = {n: model.coefficients[PS.index(n)] for n in ("y_dot", "z_dot")}
+    names = list(model.feature_names)
+    assert all(np.count_nonzero(r[[names.index("sin(phi) u1"), names.index("cos(phi) u1")]])
+               == 2 for r in rows.values())  # fmt: skip
+    named = [w for w in report.warnings if "shifted by" in w]
+    assert len(named) == 1 and "the logged phi may be offset by 0.01 rad" in named[0], named
+    _, report = select_model(other_clean, planar_library(), **FAST)
+    assert not any("shifted by" in w for w in report.warnings)
+
+
 def test_a_grown_term_that_fits_the_noise_bias_is_dropped_and_a_real_one_kept(other_clean):
     """State noise biases a short window's fit (errors in variables): `sin(phi)` in `phi'`
     took -0.077 at window 1 on 100 noisy flights and the growth kept it. Its coefficient
