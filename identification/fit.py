@@ -537,6 +537,19 @@ def _collinear_message(
     several = f"; one of {dimension} independent such combinations" if dimension > 1 else ""
     head = (f"terms {involved} are exactly collinear on this data (a combination of them is "
             f"zero to {ratio:.0e} of the largest{several}){law}")  # fmt: skip
+    if trajs:  # a variable of two values: its powers are a line in it, whatever the data
+        variables = [*trajs[0].state_names, *trajs[0].input_names]
+        read = {f.var for n in involved for f in parse_term(n)}
+        both = np.concatenate([np.column_stack([t.x, t.u]) for t in trajs])
+        for name in sorted(read & set(variables)):
+            levels = np.unique(both[:, variables.index(name)])
+            if levels.size == 2:
+                return head + (
+                    f": {name!r} takes only two values on this data ({levels[0]:g} and "
+                    f"{levels[1]:g}), so its powers and products are lines in it: a flag is no "
+                    f"variable for a polynomial library (leave {name} out: --states/--inputs), "
+                    f"and an input switched between two levels needs a third"
+                )
     inputs = set(trajs[0].input_names) if trajs else set()
     carried = [n for n in involved if {f.var for f in parse_term(n)} & inputs]
     if len(carried) == 1 and first.size:

@@ -115,6 +115,13 @@ def test_collinear_columns_are_refused_naming_them(other_clean):
     x[:, 1] = 2.0 * x[:, 0] + 1.0
     with pytest.raises(ValueError, match="variables 'y' and 'z' are the same signal"):
         fit([Trajectory(tr.t, x, tr.u, PS, PI)], lib, FitConfig())
+    # a flag among the inputs: u3^2 is u3 whatever the flights; said so (a trial's advice
+    # was "record data in which they vary independently")
+    flag = (np.arange(len(tr)) // 37 % 2).astype(float)[:, None]
+    flagged = Trajectory(tr.t, tr.x, np.hstack([tr.u, flag]), PS, (*PI, "u3"))
+    lib = library_from_spec("degree=2", PS, (*PI, "u3"))
+    with pytest.raises(ValueError, match=r"'u3' takes only two values on this data \(0 and 1\)"):
+        fit([flagged], lib, FitConfig())
 
 
 def _regulated(
