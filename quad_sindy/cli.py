@@ -381,6 +381,7 @@ def identify(
         long_enough,
         long_run_ratio,
         select_model,
+        stamp_jitter,
         state_shift_note,
         typical_length,
     )
@@ -513,6 +514,9 @@ def identify(
                 if drop_outliers:
                     _fail("--drop-outliers works with the automatic selection (--lambda auto)")
                 config = dataclasses.replace(config, lam=lam_value, window=window_value or 1)
+                trajs, stamped = stamp_jitter(trajs, lib)  # as select_model reads them
+                if stamped:
+                    typer.echo(f"warning: {stamped}")
                 model = fit(trajs, lib, config, label)
                 noted = ()
                 if library_note:
@@ -586,6 +590,7 @@ def score(
         long_enough,
         long_run_ratio,
         range_note,
+        stamp_jitter,
         state_shift_note,
         trig_variables,
     )
@@ -609,6 +614,9 @@ def score(
             angles=angles, measured=loaded.meta.get("measured_inputs", ()),
             time_unit=SECONDS_PER[units["time"]], angle_unit=RADIANS_PER[units["angles"]],
         )  # fmt: skip
+        trajs, stamped = stamp_jitter(trajs, loaded.feature_names)  # as identify reads them
+        if stamped:
+            typer.echo(f"warning: {stamped}")
         read_as = [f"{what} in {unit}" for what, unit in units.items()
                    if unit not in ("s", "rad")]  # fmt: skip
         if read_as:
