@@ -579,10 +579,16 @@ def clean(
         if np.spacing(np.max(np.abs(t[ahead]))) > 1e-9 * step:
             t = t - t[ahead][0]
     ahead = np.isfinite(t)
-    if np.any(np.diff(t[ahead]) < 0):  # out of order by less than a restart: sort
+    if np.any(np.diff(t[ahead]) < 0):  # out of order by less than a restart: sort?
         order = np.argsort(np.where(ahead, t, np.inf), kind="stable")
-        report.reordered = int(np.count_nonzero(order != np.arange(t.size)))
-        t, x, u = t[order], x[order], u[order]
+        stamps = t[ahead]
+        before = np.maximum.accumulate(np.concatenate([[-np.inf], stamps[:-1]]))
+        behind = ~ahead
+        behind[ahead] = stamps <= before
+        if _roughness(x[order]) < _roughness(x[~behind]):  # rows written out of order
+            report.reordered = int(np.count_nonzero(order != np.arange(t.size)))
+            t, x, u = t[order], x[order], u[order]
+        # else the stamps went back (a clock set back): the rows behind are dropped below
     report.held_inputs = _hold_inputs(t, u, [n in measured for n in input_names], gap_factor)
     twice = np.zeros(t.size, dtype=bool)
     twice[1:] = (
@@ -697,6 +703,21 @@ def clean(
     return segments, report
 
 
+RATE_SHARE = 0.2
+"""An input empty in at least this share of the rows is logged at a lower rate: held."""
+
+
+def _roughness(x: np.ndarray) -> float:
+    """Mean square step of the states between rows, each state over its spread."""
+    ok = np.isfinite(x).all(axis=1)
+    xs = x[ok]
+    if len(xs) < 3:
+        return 0.0
+    spread = np.std(xs, axis=0)
+    spread[spread == 0] = 1.0
+    return float(np.mean((np.diff(xs, axis=0) / spread) ** 2))
+
+
 def _hold_inputs(t: np.ndarray, u: np.ndarray, measured: Sequence[bool], longest: float) -> int:
     """Fills runs of empty (NaN) input cells in place; returns how many were filled.
 
@@ -704,14 +725,17 @@ def _hold_inputs(t: np.ndarray, u: np.ndarray, measured: Sequence[bool], longest
     axis: a trial's 50 Hz commands beside 100 Hz states, every other cell empty) would
     otherwise drop every other row, and the log fell apart into pieces too short to fit. A
     held input (a command) keeps the value of the row before until the next; a measured one
-    is interpolated in time. Runs longer than ``longest`` rows (a dropout, not a rate), and
-    cells before the first value or (measured) after the last, stay empty.
+    is interpolated in time. Only an input empty in :data:`RATE_SHARE` of the rows or more
+    (a rate) is filled: sporadic empty cells are lost samples, and a command that changes
+    every row was held wrong there (an adversarial trial: `phi_dot' = 2061 u2` for 2128).
+    Runs longer than ``longest`` rows, and cells before the first value or (measured) after
+    the last, stay empty.
     """
     filled = 0
     ok_t = np.isfinite(t)
     for j, is_measured in enumerate(measured):
         empty = np.isnan(u[:, j]) & ok_t
-        if not empty.any() or empty.all():
+        if not empty.any() or empty.all() or empty.sum() < RATE_SHARE * ok_t.sum():
             continue
         edges = np.flatnonzero(np.diff(np.concatenate([[0], empty.astype(int), [0]])))
         fill = np.zeros(t.size, dtype=bool)
@@ -737,8 +761,13 @@ def _regular_grid(t: np.ndarray, resolution: float) -> np.ndarray:
     Stamps stored as float32 (a step of 1e-3 s at t = 1e4 s) or rounded to a few decimals
     vary by their resolution though the clock was regular; each row's own step then made
     up jitter of 10 % and a trial got 12 terms for 7 (float32 stamps at 1e4 s). Where every
-    step is within two resolutions of the median step (both ends rounded), the stamps are
-    the least-squares line through them; else (a real jitter, a gap) they are kept.
+    step is within one resolution of the median step, the stamps are
+    the least-squares line through them; else (a real jitter, a gap) they are kept. Rounding
+    both ends of a step moves it by at most one resolution: where steps vary more, the
+    clock did (an adversarial trial's 8 to 12 ms steps stamped to 1 ms were read as a grid
+    at two resolutions, and held out 3 times worse); and a regular clock's stamps stay
+    within a resolution of their line, where irregular steps add up and drift off it (the
+    trial's 9 to 11 ms steps stamped to 1 ms).
     """
     if t.size < 3:
         return t
@@ -746,13 +775,16 @@ def _regular_grid(t: np.ndarray, resolution: float) -> np.ndarray:
     median = float(np.median(steps))
     spread = float(np.max(np.abs(steps - median)))
     tiny = 8 * float(np.spacing(np.max(np.abs(t))))
-    if not (median > 0 and 1e-9 * median < spread <= 2 * resolution + tiny):
+    if not (median > 0 and 1e-9 * median < spread <= resolution + tiny):
         return t
     if resolution < 1e-7 * median:  # float64 round-off: nothing to repair
         return t
     k = np.arange(t.size, dtype=np.float64)
-    slope, start = np.polyfit(k, t, 1)
-    return start + slope * k
+    slope, start = np.polyfit(k, t - t[0], 1)
+    line = t[0] + start + slope * k
+    # a rounded regular clock stays within a resolution of its line; steps that varied
+    # within one resolution but add up (irregular sampling stamped to 1 ms) drift off it
+    return line if np.max(np.abs(t - line)) <= resolution + tiny else t
 
 
 def _time_restarts(t: np.ndarray, gap_factor: float) -> np.ndarray:
@@ -1012,9 +1044,13 @@ def _is_number(text: str) -> bool:
     return True
 
 
-BAD_CELLS = 0.05
-"""A text column is read as numbers, its other cells as missing, where at most this share of
-its filled cells are not numbers (a ``-`` or ``#VALUE!`` in a numeric log)."""
+MISSING_MARKER = re.compile(
+    r"[-\u2013\u2014?.]+|none|null|nil|n/?a|nan|missing|undefined|empty|err(or)?"
+    r"|#[a-z0-9/]+[!?]?",
+    re.IGNORECASE,
+)
+"""Cells that mark a missing value in a numeric column (``-``, ``None``, Excel's ``#VALUE!``).
+Other words (``LAND``, ``hover``) make a column categorical: text."""
 
 
 def _numbers_in_text(column: Any) -> tuple[np.ndarray, list[str]]:
@@ -1045,10 +1081,11 @@ def _float_columns(
     Timestamps become seconds since the earliest one (exact in int64 ns: float64 seconds since
     1970 would round the steps). A numeric ``time`` column is converted by ``time_unit``
     (seconds per unit) from its earliest value. Empty cells are NaN. A text column whose
-    filled cells are numbers but for :data:`BAD_CELLS` of them is numeric, the others read
-    as missing (a trial's single ``-`` cell made ``z_dot`` a text column, left out without a
-    word: a model without it, exit 0); numbers written with decimal commas are refused by
-    name. What was changed is appended to ``notes``.
+    cells are numbers and missing-value marks (:data:`MISSING_MARKER`) is numeric, the marks
+    missing (a trial's single ``-`` cell made ``z_dot`` a text column, left out without a
+    word: a model without it, exit 0); one with other words (a flight mode's ``1``, ``2``,
+    ``LAND``) is text, left out unless required, then refused naming a word; numbers written
+    with decimal commas are refused by name. What was changed is appended to ``notes``.
     """
     import pyarrow as pa
     import pyarrow.compute as pc
@@ -1080,15 +1117,15 @@ def _float_columns(
                                      f"{column.type})") from None  # fmt: skip
                 continue
             values, bad = _numbers_in_text(column)
-            filled = len(bad) + int(np.sum(np.isfinite(values) | np.isinf(values)))
             comma = [b for b in bad if re.fullmatch(r"[-+]?\d*,\d+([eE][-+]?\d+)?", b)]
-            if comma and len(comma) > BAD_CELLS * filled:
+            if comma:
                 raise ValueError(f"{path}: column {name!r} holds numbers written with decimal "
                                  f"commas (e.g. {comma[0]!r}): write them with decimal "
                                  "points") from None  # fmt: skip
-            if not bad or len(bad) > BAD_CELLS * filled:
+            words = [b for b in bad if not MISSING_MARKER.fullmatch(b)]
+            if words or not bad:
                 if name in required:
-                    example = bad[0] if bad else column[0].as_py()
+                    example = words[0] if words else column[0].as_py()
                     raise ValueError(f"{path}: column {name!r} is not numeric (e.g. "
                                      f"{example!r})") from None  # fmt: skip
                 if notes is not None:

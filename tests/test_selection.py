@@ -758,7 +758,7 @@ def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
 
 @pytest.mark.parametrize(
     "variant", ["text_cell", "decimal_comma", "unsorted", "half_rate_input", "extra_columns",
-                "header_only", "empty_column"],
+                "header_only", "empty_column", "mode_column", "input_dropouts", "clock_back"],
 )  # fmt: skip
 def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
     other_clean, tmp_path, variant
@@ -767,7 +767,10 @@ def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
     refusal or a message that named the wrong thing): a '-' cell made a column text, left
     out without a word; decimal commas; rows written out of time order (dropped as stale);
     50 Hz commands beside 100 Hz states, every other input cell empty (refused); columns the
-    preset does not name (refused); a header without rows; an empty column."""
+    preset does not name (refused); a header without rows; an empty column. And what an
+    adversarial trial then found the first repairs doing wrong: a flight-mode column of
+    codes and words read as a state; sporadic empty input cells held (a command that
+    changes every row: wrong model); a clock set back 25 ms sorted into interleaved rows."""
     tr = other_clean[0]
     text = _csv_text(tr)
     lines = text.split("\n")
@@ -793,6 +796,16 @@ def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
     elif variant == "empty_column":
         lines = [",".join(ln.split(",")[:6] + [""] + ln.split(",")[7:]) if k else ln
                  for k, ln in enumerate(lines)]  # fmt: skip
+    elif variant == "mode_column":  # codes, and a word near the end
+        lines = [lines[0] + ",mode"] + [ln + ("," + ("LAND" if k > 580 else str(1 + k // 200)))
+                                        for k, ln in enumerate(lines[1:])]  # fmt: skip
+    elif variant == "input_dropouts":
+        for k in (101, 250, 377):
+            cells = lines[k].split(",")
+            lines[k] = ",".join(cells[:-2] + ["", cells[-1]])
+    elif variant == "clock_back":  # stamps set back 25 ms at row 300: the rows are in order
+        lines = [lines[0]] + [f"{float(tr.t[k] - 0.025 * (k >= 300))!r},"
+                              + ln.split(",", 1)[1] for k, ln in enumerate(lines[1:])]  # fmt: skip
     path = tmp_path / "log.csv"
     path.write_text("\n".join(lines), encoding="utf-8")
     refused = {"decimal_comma": r"column 't' holds numbers written with decimal commas "
@@ -803,7 +816,7 @@ def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
         with pytest.raises(ValueError, match=refused[variant]):
             load_data([path], system="planar")
         return
-    segs, report = load_data([path], system="planar")
+    segs, report = load_data([path], system=None if variant == "mode_column" else "planar")
     summary = report.summary()
     assert segs[0].state_names == PS and segs[0].input_names == PI
     if variant == "text_cell":  # the column kept, the cell missing (bridged)
@@ -819,6 +832,14 @@ def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
     elif variant == "extra_columns":
         assert "column(s) ['armed', '(unnamed)'] are not the planar preset's" in summary
         assert np.array_equal(segs[0].x, tr.x)
+    elif variant == "mode_column":  # categorical: text, not a state
+        assert "text column 'mode' left out" in summary and report.rows_out == len(tr)
+    elif variant == "input_dropouts":  # lost samples, not a rate: the rows go
+        assert report.held_inputs == 0 and report.nonfinite_rows == 3
+    elif variant == "clock_back":  # not sorted: the rows stamped behind are dropped
+        assert report.reordered == 0 and report.stale_rows == 2  # stamped before 2.99 s
+        assert np.array_equal(np.concatenate([s.x for s in segs]),
+                              np.delete(tr.x, [300, 301], axis=0))  # fmt: skip
 
 
 def test_stamp_noise_is_told_from_irregular_sampling_by_the_data():
@@ -865,6 +886,12 @@ def test_float32_time_stamps_are_read_as_the_regular_clock_they_round(other_clea
         assert np.ptp(np.diff(seg.t)) < 1e-9 and abs(np.median(np.diff(seg.t)) - 0.01) < 2e-6
     model, _ = select_model(segs, planar_library(), **FAST)
     assert check_support(model, truth_planar(OTHER_PLANAR)).exact_support
+    # irregular steps stamped to 1 ms vary within a resolution here and there, but drift off
+    # any regular line: kept (an adversarial trial's were read as a grid, 2.5 times worse)
+    rng = np.random.default_rng(1)
+    stamps = np.round(np.cumsum(rng.uniform(0.009, 0.011, 600)), 3)
+    _, report = clean(stamps, other_clean[0].x, other_clean[0].u, PS, PI)
+    assert report.regular == 0 and report.jitter > 0.05
 
 
 def test_time_unit_restarts_and_mixed_units_between_files(other_clean, tmp_path):
