@@ -598,7 +598,7 @@ def clean(
     wrapped = []
     for j, name in enumerate(state_names):
         ok = np.isfinite(x[:, j])
-        if name in angles and ok.sum() > 1:
+        if name in angles and ok.sum() > 1 and _wrapped(x[ok, j]):
             unwrapped = np.unwrap(x[ok, j])
             jumps = int(np.count_nonzero(np.abs(np.diff(unwrapped - x[ok, j])) > 1.0))
             report.unwrapped += jumps
@@ -705,6 +705,20 @@ def clean(
 
 RATE_SHARE = 0.2
 """An input empty in at least this share of the rows is logged at a lower rate: held."""
+
+
+def _wrapped(angle: np.ndarray) -> bool:
+    """Whether an angle column's jumps above pi are a logger's wraps of a radian angle.
+
+    A wrapped log stays within one turn, or jumps by about 2 pi; an angle in degrees moving
+    3 to 7 degrees a row jumps by other amounts above pi (an adversarial trial's pendulum
+    was "unwrapped" into nonsense, and its degree note was lost).
+    """
+    jumps = np.abs(np.diff(angle))
+    big = jumps[jumps > np.pi]
+    if not big.size:
+        return False
+    return bool(np.ptp(angle) <= 2 * np.pi + 0.1 or np.all(np.abs(big - 2 * np.pi) < 1.0))
 
 
 def _roughness(x: np.ndarray) -> float:

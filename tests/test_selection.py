@@ -609,6 +609,12 @@ def test_a_frozen_sensor_file_is_named_and_a_radian_spin_is_not_called_degrees(o
     segs, report = clean(tr.t, x, tr.u, PS, PI, angles=("phi",))
     assert report.unwrapped >= 3 and np.ptp(segs[0].x[:, 2]) > 6 * np.pi - 0.5
     assert not any("inside sin/cos" in n for n in data_warnings(segs, planar_library()))
+    # in degrees, moving 4 to 6 degrees a row: no wraps to undo, and the degree note stays
+    # (an adversarial trial's pendulum was "unwrapped" and its note lost)
+    x[:, 2] = 90 * np.sin(np.linspace(0, 60, len(tr)))
+    segs, report = clean(tr.t, x, tr.u, PS, PI, angles=("phi",))
+    assert report.unwrapped == 0 and np.array_equal(segs[0].x[:, 2], x[:, 2])
+    assert any("inside sin/cos" in n for n in data_warnings(segs, planar_library()))
 
 
 def test_a_row_written_twice_is_removed_without_splitting_the_log(other_clean):
@@ -868,6 +874,12 @@ def test_stamp_noise_is_told_from_irregular_sampling_by_the_data():
     for tr in regular:
         np.testing.assert_allclose(np.diff(tr.t), 0.01, rtol=2e-3)
         assert np.ptp(np.diff(tr.t)) < 1e-12
+    # under state noise too (a first rule, half the residual, missed it: held out 20 times
+    # worse than on the true stamps); irregular samples with the same noise are kept
+    noisy = [dataclasses.replace(t, x=t.x + rng.normal(0, 1e-3, t.x.shape)) for t in stamped]
+    assert stamp_jitter(noisy, planar_library())[1] is not None
+    noisy = [dataclasses.replace(t, x=t.x + rng.normal(0, 1e-3, t.x.shape)) for t in sampled]
+    assert stamp_jitter(noisy, planar_library())[1] is None
 
 
 def test_float32_time_stamps_are_read_as_the_regular_clock_they_round(other_clean, tmp_path):
