@@ -548,7 +548,7 @@ def clean(
     """
     t = np.asarray(t, dtype=np.float64)
     x = np.array(x, dtype=np.float64).reshape(t.size, -1)  # a copy: angles are unwrapped
-    u = np.asarray(u, dtype=np.float64).reshape(t.size, -1)
+    u = np.array(u, dtype=np.float64).reshape(t.size, -1)  # a copy: empty cells are held
     restarts = _time_restarts(t, gap_factor)
     if restarts.size:  # logs appended in one file: clean each on its own
         options = dict(gap_factor=gap_factor, outlier_z=outlier_z, min_rows=min_rows,
