@@ -585,7 +585,9 @@ def clean(
         before = np.maximum.accumulate(np.concatenate([[-np.inf], stamps[:-1]]))
         behind = ~ahead
         behind[ahead] = stamps <= before
-        if _roughness(x[order]) < _roughness(x[~behind]):  # rows written out of order
+        kept = int(np.count_nonzero(~behind))
+        # rows written out of order (or newest first: dropping the rows behind leaves none)
+        if kept < ahead.sum() // 2 or _roughness(x[order]) < _roughness(x[~behind]):
             report.reordered = int(np.count_nonzero(order != np.arange(t.size)))
             t, x, u = t[order], x[order], u[order]
         # else the stamps went back (a clock set back): the rows behind are dropped below
@@ -706,6 +708,11 @@ def clean(
 RATE_SHARE = 0.2
 """An input empty in at least this share of the rows is logged at a lower rate: held."""
 
+RATE_REGULAR = 0.9
+"""...where this share of the gaps between its filled cells have one length (a rate; a
+recheck trial's cells lost at random, a quarter or half of them, were held and gave wrong
+models)."""
+
 
 def _wrapped(angle: np.ndarray) -> bool:
     """Whether an angle column's jumps above pi are a logger's wraps of a radian angle.
@@ -751,6 +758,9 @@ def _hold_inputs(t: np.ndarray, u: np.ndarray, measured: Sequence[bool], longest
         empty = np.isnan(u[:, j]) & ok_t
         if not empty.any() or empty.all() or empty.sum() < RATE_SHARE * ok_t.sum():
             continue
+        gaps = np.diff(np.flatnonzero(np.isfinite(u[:, j]) & ok_t))
+        if gaps.size and np.max(np.bincount(gaps)) < RATE_REGULAR * gaps.size:
+            continue  # cells lost at random, not a rate: the rows go
         edges = np.flatnonzero(np.diff(np.concatenate([[0], empty.astype(int), [0]])))
         fill = np.zeros(t.size, dtype=bool)
         for a, b in zip(edges[::2], edges[1::2], strict=True):
@@ -976,9 +986,15 @@ def _read_table(
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such data file: {path}")
-    wanted = [c for c in (time, *(states or ()), *(inputs or ())) if c]
+    preset = PRESET_VARIABLES.get(system or "", ((), ()))
+    if states is None and inputs is None:  # a preset's names must be numbers too
+        wanted = [c for c in (time, *preset[0], *preset[1]) if c]
+    else:
+        wanted = [c for c in (time, *(states or ()), *(inputs or ())) if c]
+    auto = system is None and states is None  # every numeric column may become a state
     if path.suffix.lower() in (*PARQUET_SUFFIXES, ".npz"):
-        table = read_table(path, time=time, time_unit=time_unit, required=wanted, notes=notes)
+        table = read_table(path, time=time, time_unit=time_unit, required=wanted, notes=notes,
+                           auto=auto)  # fmt: skip
         names = list(table)
         if not names or not len(table[names[0]]):
             raise ValueError(f"{path} has no rows of numeric columns")
@@ -989,7 +1005,7 @@ def _read_table(
             table = dict(zip(columns, table.values(), strict=True))
             names = list(columns)
     else:
-        table = _read_csv_columns(path, columns, wanted, time, time_unit, notes)
+        table = _read_csv_columns(path, columns, wanted, time, time_unit, notes, auto)
         names = list(table)
     data = np.column_stack(list(table.values())) if names else np.zeros((0, 0))
     if not len(data):
@@ -1010,6 +1026,7 @@ def _read_csv_columns(
     time: str,
     time_unit: float,
     notes: list[str] | None = None,
+    auto: bool = False,
 ) -> dict[str, np.ndarray]:
     """A CSV file's numeric columns (the delimiter, a header, quotes, a BOM found as written)."""
     import pyarrow as pa
@@ -1046,7 +1063,7 @@ def _read_csv_columns(
         if "Could not skip initial" in str(exc):  # a header and no line after it
             raise ValueError(f"{path} has a header but no rows") from None
         raise ValueError(f"{path}: not a numeric CSV ({exc})") from None
-    out = _float_columns(table, path, wanted, time, time_unit, notes)
+    out = _float_columns(table, path, wanted, time, time_unit, notes, auto)
     return {("_" if c.startswith("_") and c[1:].isdigit() else c): v for c, v in out.items()}
 
 
@@ -1089,6 +1106,7 @@ def _float_columns(
     time: str | None,
     time_unit: float,
     notes: list[str] | None = None,
+    auto: bool = False,
 ) -> dict[str, np.ndarray]:
     """An Arrow table's columns as float64 arrays; text columns left out unless required.
 
@@ -1100,6 +1118,9 @@ def _float_columns(
     word: a model without it, exit 0); one with other words (a flight mode's ``1``, ``2``,
     ``LAND``) is text, left out unless required, then refused naming a word; numbers written
     with decimal commas are refused by name. What was changed is appended to ``notes``.
+    With ``auto`` (no states named: every numeric column may be one), a column of numbers
+    with a few words (5 %) is refused: left out, a state vanished (a recheck trial's `z_dot`
+    with five ``x`` cells: ``z' = 0``); read, a label became a state.
     """
     import pyarrow as pa
     import pyarrow.compute as pc
@@ -1137,6 +1158,14 @@ def _float_columns(
                                  f"commas (e.g. {comma[0]!r}): write them with decimal "
                                  "points") from None  # fmt: skip
             words = [b for b in bad if not MISSING_MARKER.fullmatch(b)]
+            numbers = int(np.sum(~np.isnan(values)))
+            if words and auto and numbers >= 19 * len(words):
+                raise ValueError(
+                    f"{path}: column {name!r} holds numbers and {len(words)} cell(s) of words "
+                    f"(e.g. {words[0]!r}): a numeric column with bad cells, or labels? Fix "
+                    "the cells, or name the states and inputs (--states, --inputs, --system) "
+                    "so that it is read or left out as you mean"
+                ) from None
             if words or not bad:
                 if name in required:
                     example = words[0] if words else column[0].as_py()
@@ -1165,6 +1194,7 @@ def read_table(
     time_unit: float = 1.0,
     required: Sequence[str] = (),
     notes: list[str] | None = None,
+    auto: bool = False,
 ) -> dict[str, np.ndarray]:
     """Reads a parquet, CSV or NPZ file into float64 columns.
 
@@ -1180,6 +1210,7 @@ def read_table(
         time_unit: Seconds per unit of a numeric ``time`` column.
         required: Columns that must be numeric where present (a text one raises, naming it).
         notes: Where given, what reading changed is appended (:func:`_float_columns`).
+        auto: No states are named (every numeric column may become one).
 
     Returns:
         Column name -> 1-D float array.
@@ -1215,7 +1246,8 @@ def read_table(
             )
     except (OSError, pa.ArrowInvalid) as exc:  # unreadable, or not that format inside
         raise ValueError(f"{path}: cannot read the log ({exc})") from None
-    return _float_columns(table, path, [*(columns or ()), *required], time, time_unit, notes)
+    return _float_columns(table, path, [*(columns or ()), *required], time, time_unit, notes,
+                          auto)  # fmt: skip
 
 
 def is_npz_archive(path: str | Path) -> bool:
