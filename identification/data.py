@@ -779,6 +779,13 @@ def _hold_inputs(t: np.ndarray, u: np.ndarray, measured: Sequence[bool], longest
     return filled
 
 
+def clock_line(t: np.ndarray) -> np.ndarray:
+    """The least-squares line through a segment's stamps: the regular clock they stamp."""
+    k = np.arange(t.size, dtype=np.float64)
+    slope, start = np.polyfit(k, t - t[0], 1)  # from the first stamp: exact at epoch times
+    return t[0] + start + slope * k
+
+
 def _regular_grid(t: np.ndarray, resolution: float) -> np.ndarray:
     """A segment's stamps as a regular grid where their steps vary only by the resolution.
 
@@ -803,9 +810,7 @@ def _regular_grid(t: np.ndarray, resolution: float) -> np.ndarray:
         return t
     if resolution < 1e-7 * median:  # float64 round-off: nothing to repair
         return t
-    k = np.arange(t.size, dtype=np.float64)
-    slope, start = np.polyfit(k, t - t[0], 1)
-    line = t[0] + start + slope * k
+    line = clock_line(t)
     # a rounded regular clock stays within a resolution of its line; steps that varied
     # within one resolution but add up (irregular sampling stamped to 1 ms) drift off it
     return line if np.max(np.abs(t - line)) <= resolution + tiny else t

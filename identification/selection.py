@@ -68,7 +68,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.data import IdentificationWarning, Trajectory, data_ranges
+from identification.data import IdentificationWarning, Trajectory, clock_line, data_ranges
 from identification.features import compile_rhs, parse_term, term_name
 from identification.fit import (
     TALLY,
@@ -1226,8 +1226,9 @@ def select_model(
     names = [term_name(parse_term(n, variables)) for n in library]
     base = config or FitConfig(optimizer="stepwise")
     TALLY.counts.clear()
-    check_identifiable(Gram.stack(grams(trajs, names, "forward", 1)), names, trajs)
-    trajs, stamped = stamp_jitter(trajs, names)
+    one_step = Gram.stack(grams(trajs, names, "forward", 1))
+    check_identifiable(one_step, names, trajs)
+    trajs, stamped = stamp_jitter(trajs, names, one_step)
     # The stage points need an rhs accurate near the data. Dense least squares is that on a
     # well-conditioned library; on a nearly singular one (6-DOF at small tilt, condition 6e11)
     # it is accurate on the data but wild half a step off it, so the stepwise optimizer uses
@@ -1590,7 +1591,6 @@ def input_shift_note(
     """
     inputs = set(trajs[0].input_names)
     variables = [*trajs[0].state_names, *trajs[0].input_names]
-    cols = sorted({int(j) for j in np.flatnonzero(np.any(xi != 0, axis=0))})
     driven = [i for i in range(xi.shape[0])
               if any(f.var in inputs for j in np.flatnonzero(xi[i])
                      for f in parse_term(names[j], variables))]  # fmt: skip
@@ -1598,15 +1598,10 @@ def input_shift_note(
     usable = long_enough(trajs, window + 2 * margin + 2)
     if not driven or not usable:
         return None
-    sub = [names[j] for j in cols]
-    xs = xi[:, cols]
-    supports = {i: [k for k, j in enumerate(cols) if xi[i, j] != 0] for i in driven}
+    refit = _own_terms_refit(xi, names, window, driven)
 
     def residuals(shift: int) -> tuple[np.ndarray, np.ndarray]:
-        part = [t.shift_inputs(shift, margin) for t in usable]
-        g = Gram.stack(grams(part, sub, "rk4", window, xs))
-        pairs = [_residual_variance(g, i, supports[i]) for i in driven]
-        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+        return refit([t.shift_inputs(shift, margin) for t in usable])
 
     rss0, sigma0 = residuals(0)
     bar = _significance_bar(len(INPUT_SHIFTS) * len(driven))
@@ -1641,6 +1636,24 @@ def input_shift_note(
         f"rows tried): {cause}; {command} with --input-shift {applied + shift} if the "
         "log is off (the other warnings may be its symptoms)"
     )
+
+
+def _own_terms_refit(xi: np.ndarray, names: Sequence[str], window: int, rows: Sequence[int]) -> Any:
+    """Per data set, RSS and residual variance of equations ``rows`` on the model's own terms.
+
+    Each equation is refitted on its terms in ``xi`` (RK4 rows at ``window``, stage points
+    from ``xi``): the shift notes compare the same model on shifted copies of the data.
+    """
+    cols = sorted({int(j) for j in np.flatnonzero(np.any(xi != 0, axis=0))})
+    sub, xs = [names[j] for j in cols], xi[:, cols]
+    supports = {i: [k for k, j in enumerate(cols) if xi[i, j] != 0] for i in rows}
+
+    def residuals(part: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
+        g = Gram.stack(grams(part, sub, "rk4", window, xs))
+        pairs = [_residual_variance(g, i, supports[i]) for i in rows]
+        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+
+    return residuals
 
 
 def _state_taken_later(tr: Trajectory, state: int, rows: int, margin: int) -> Trajectory:
@@ -1680,20 +1693,13 @@ def state_shift_note(
     rows = [i for i in range(xi.shape[0]) if np.any(xi[i])]
     if not usable or not rows:
         return None
-    cols = sorted({int(j) for j in np.flatnonzero(np.any(xi != 0, axis=0))})
-    sub, xs = [names[j] for j in cols], xi[:, cols]
-    supports = {i: [k for k, j in enumerate(cols) if xi[i, j] != 0] for i in rows}
-
-    def residuals(part: list[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
-        g = Gram.stack(grams(part, sub, "rk4", window, xs))
-        pairs = [_residual_variance(g, i, supports[i]) for i in rows]
-        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
-
+    residuals = _own_terms_refit(xi, names, window, rows)
     rss0, sigma0 = residuals([t.slice(margin, len(t) - margin) for t in usable])
     bar = _significance_bar(len(states) * len(INPUT_SHIFTS) * len(rows))
     scale = np.maximum(np.asarray(ratio, dtype=float)[rows], 1.0)
     variables = [*states, *trajs[0].input_names]
-    reads = [{f.var for k in supports[i] for f in parse_term(sub[k], variables)} for i in rows]
+    reads = [{f.var for j in np.flatnonzero(xi[i]) for f in parse_term(names[j], variables)}
+             for i in rows]  # fmt: skip
     found: list[tuple[float, int, int, np.ndarray]] = []
     for s in range(len(states)):
         # the equations the column enters: its own, and those whose terms read it (the RK4
@@ -1902,15 +1908,8 @@ STAMP_FLOOR = 1e-8
 comparison would be between round-offs."""
 
 
-def _regular(tr: Trajectory) -> Trajectory:
-    """``tr`` with its stamps on the least-squares line through them (a regular clock)."""
-    k = np.arange(len(tr), dtype=np.float64)
-    slope, start = np.polyfit(k, tr.t - tr.t[0], 1)
-    return dataclasses.replace(tr, t=tr.t[0] + start + slope * k)
-
-
 def stamp_jitter(
-    trajs: Sequence[Trajectory], names: Sequence[str]
+    trajs: Sequence[Trajectory], names: Sequence[str], own: Gram | None = None
 ) -> tuple[list[Trajectory], str | None]:
     """The trajectories on regular clocks where their jittery stamps fit worse, and a note.
 
@@ -1923,32 +1922,34 @@ def stamp_jitter(
     them. Where the regular clock's residual is lower by more than the Bonferroni bar for
     the equations (in residual variances), it is used and said; else the stamps are kept
     (a first rule, at most half the residual, missed the same stamps under state noise
-    1e-3, whose held-out score was 20 times worse than on the true stamps).
+    1e-3, whose held-out score was 20 times worse than on the true stamps). ``own``: the
+    one-step Gram on the stamps, where the caller has it.
     """
     steps = [np.diff(t.t) for t in trajs if len(t) > 3]
     if not steps or max(np.ptp(h) / np.median(h) for h in steps) <= STAMP_JITTER:
         return list(trajs), None
-    regular = [_regular(t) if len(t) > 3 else t for t in trajs]
+    regular = [dataclasses.replace(t, t=clock_line(t.t)) if len(t) > 3 else t for t in trajs]
 
-    def residual(data: Sequence[Trajectory]) -> tuple[np.ndarray, float]:
+    def residual(g: Gram) -> tuple[np.ndarray, float]:
         """Per equation, the least-squares residual's share of the target; the rows left."""
-        g = Gram.stack(grams(data, list(names), "forward", 1))
         total = np.sum(g.r_aug[:, g.p :] ** 2, axis=0)  # the targets' squares
         explained = np.sum(g.z**2, axis=0)
         shares = np.maximum(total - explained, 0.0) / np.maximum(total, 1e-300)
         return shares, max(float(g.rows) - g.p, 1.0)
 
-    (own_eq, _), (grid_eq, rows) = residual(trajs), residual(regular)
+    own = own if own is not None else Gram.stack(grams(trajs, list(names), "forward", 1))
+    own_eq = residual(own)[0]
+    grid_eq, rows = residual(Gram.stack(grams(regular, list(names), "forward", 1)))
     # the clock must fit better by more than chance: the drop in residual variances of the
     # clock's fit, summed over the equations, past the bar for the equations compared
     drop = float(np.sum((own_eq - grid_eq) / np.maximum(grid_eq / rows, 1e-300)))
-    own, grid = float(own_eq.sum()), float(grid_eq.sum())
-    if own <= STAMP_FLOOR or drop <= _significance_bar(len(own_eq)):
+    stamped, clocked = float(own_eq.sum()), float(grid_eq.sum())
+    if stamped <= STAMP_FLOOR or drop <= _significance_bar(len(own_eq)):
         return list(trajs), None
     worst = max(float(np.max(np.abs(a.t - b.t))) for a, b in zip(trajs, regular, strict=True))
     return regular, (
         f"the time stamps jitter (up to {worst:.3g} s off a regular clock) but the data fit "
-        f"a regular clock better (residual {grid / own:.2g} of the stamps' own steps'): "
+        f"a regular clock better (residual {clocked / stamped:.2g} of the stamps' own steps'): "
         "read as each segment's regular clock (stamps with noise, such as message arrival "
         "times)"
     )
