@@ -372,19 +372,17 @@ def identify(
     import dataclasses
 
     from identification.data import PRESET_ANGLES, load_data
-    from identification.fit import FitConfig, fit
-    from identification.libraries import library_from_spec, spec_angles
-    from identification.selection import (
-        WINDOWS,
+    from identification.diagnostics import (
         data_warnings,
         input_shift_note,
-        long_enough,
-        long_run_ratio,
-        select_model,
         stamp_jitter,
         state_shift_note,
-        typical_length,
     )
+    from identification.fit import FitConfig, fit
+    from identification.libraries import library_from_spec, spec_angles
+    from identification.scoring import long_enough, typical_length
+    from identification.selection import WINDOWS, select_model
+    from identification.support import long_run_ratio
 
     def split(text: str | None) -> list[str] | None:
         return [c.strip() for c in text.split(",") if c.strip()] if text else None
@@ -582,18 +580,17 @@ def score(
     cleaned as ``identify`` reads them, with the model's variables.
     """
     from identification.data import load_data
-    from identification.model import load_model
-    from identification.selection import (
+    from identification.diagnostics import (
         data_warnings,
-        held_out_errors,
         input_shift_note,
-        long_enough,
-        long_run_ratio,
         range_note,
         stamp_jitter,
         state_shift_note,
         trig_variables,
     )
+    from identification.model import load_model
+    from identification.scoring import held_out_errors, long_enough
+    from identification.support import long_run_ratio
 
     if not (math.isfinite(seconds) and seconds > 0):
         _fail(f"--seconds must be a positive number, got {seconds:g}")

@@ -19,7 +19,8 @@ import numpy as np
 from identification.experiments.synthetic import check_support, truth_planar
 from identification.libraries import planar_library
 from identification.rollouts import excitation_rollouts
-from identification.selection import held_out_errors, select_model
+from identification.scoring import held_out_errors
+from identification.selection import select_model
 from quad_envs.params import PlanarQuadParams
 
 VEHICLE = {"mass": "0.5", "Ixx": "3e-3", "arm_length": "0.15", "rotor_force_max": "4.905"}

@@ -438,7 +438,7 @@ def test_show_reads_a_rotorcraft_model_and_names_what_a_file_is(tmp_path):
 
 
 def test_a_short_fragment_does_not_cap_the_window_and_horizon(other_clean):
-    from identification.selection import typical_length
+    from identification.scoring import typical_length
 
     fragment = other_clean[0].slice(0, 25)
     assert typical_length([*other_clean, fragment]) == len(other_clean[0])
@@ -590,7 +590,7 @@ def test_a_frozen_sensor_file_is_named_and_a_radian_spin_is_not_called_degrees(o
     gave `z' = 0.2095 y_dot` with exit 0, the notes blaming outliers) is named. An angle the
     log wrapped at +-pi is in radians: a spinning flight unwrapped to 19 rad is not called a
     log in degrees (the note fired on every identify and score)."""
-    from identification.selection import data_warnings
+    from identification.diagnostics import data_warnings
 
     frozen = [dataclasses.replace(t, meta={"source": f"f{i}.csv"}) for i, t in
               enumerate(other_clean)]  # fmt: skip
@@ -875,8 +875,8 @@ def test_stamp_noise_is_told_from_irregular_sampling_by_the_data():
     or a regular clock stamped with noise (a trial: +-1 ms on an exact 10 ms clock gave 324
     "outlying steps" and a misfit note). A fit of the whole library tells them apart: the
     noisy stamps are read as a regular clock and said, the irregular samples are kept."""
+    from identification.diagnostics import stamp_jitter
     from identification.experiments.truth import model_from_truth
-    from identification.selection import stamp_jitter
 
     truth, rng = model_from_truth("planar"), np.random.default_rng(4)
     sampled, stamped = [], []
@@ -1338,7 +1338,7 @@ def test_six_dof_flight_generator_refuses_a_flight_the_pd_lost():
 def test_integrator_resolution_is_rk4_against_two_half_steps():
     """x' = lam x: one RK4 step multiplies by R(z), two half steps by R(z/2)^2 (z = lam h);
     the resolution is the RMS of their difference over the horizon, normalised."""
-    from identification.selection import integrator_resolution
+    from identification.scoring import integrator_resolution
 
     lam, h, horizon = -3.0, 0.05, 10
     t = np.arange(40) * h
@@ -1422,7 +1422,7 @@ def test_truth_gaps_separate_a_search_miss_from_twins_the_data_cannot_tell_apart
 
 
 def test_long_run_ratio_is_one_for_white_residuals_and_the_bartlett_sum_for_smooth_ones():
-    from identification.selection import long_run_ratio
+    from identification.support import long_run_ratio
 
     rng = np.random.default_rng(0)
     n, dt, phi = 40_000, 0.01, 0.8
@@ -1444,7 +1444,7 @@ def test_long_run_ratio_is_one_for_white_residuals_and_the_bartlett_sum_for_smoo
 
 def test_pruning_drops_noise_terms_and_keeps_small_real_ones_against_the_long_run_variance():
     from identification.fit import Gram
-    from identification.selection import prune_insignificant
+    from identification.support import prune_insignificant
 
     rng = np.random.default_rng(1)
     n = 5000
@@ -1467,7 +1467,7 @@ def test_growth_replaces_a_wrong_twin_and_adds_the_small_term_a_greedy_stop_miss
     best 3-term support in the pool is the truth; a support that is already right, beside 20
     noise columns, does not grow."""
     from identification.fit import Gram
-    from identification.selection import grow_significant
+    from identification.support import grow_significant
 
     rng = np.random.default_rng(0)
     a, b, e, c = rng.normal(size=(4, 4000))
@@ -1492,7 +1492,7 @@ def test_simpler_twins_are_taken_only_while_the_swaps_together_pass_the_f_test()
     F-test's 10.83), both together 15.1: one is taken, not both (before, each swap was tested
     against the support left by the one before, and both were)."""
     from identification.fit import Gram
-    from identification.selection import resolve_collinear
+    from identification.support import resolve_collinear
 
     rng = np.random.default_rng(1)
     b1, b2, d1, d2 = rng.normal(size=(4, 4000))
@@ -1511,7 +1511,7 @@ def test_a_simple_twin_gives_way_to_a_complex_one_the_data_prefer_past_the_f_tes
     which fits about 57 residual variances better: exchanged, and not reported as a twin
     that fits equally well (before, any twin that fit better was reported so)."""
     from identification.fit import Gram
-    from identification.selection import indistinguishable_twins, resolve_collinear
+    from identification.support import indistinguishable_twins, resolve_collinear
 
     rng = np.random.default_rng(1)
     b1, d1, noise = rng.normal(size=(3, 4000))
@@ -1531,7 +1531,7 @@ def test_growth_takes_the_complex_twins_the_data_prefer_together():
     """Both chosen terms are the simpler twins of the true ones; the best support of the same
     size (the complex pair) fits 15 residual variances better, past the F-test: taken."""
     from identification.fit import Gram
-    from identification.selection import grow_significant
+    from identification.support import grow_significant
 
     rng = np.random.default_rng(1)
     b1, b2, d1, d2 = rng.normal(size=(4, 4000))
@@ -1546,7 +1546,7 @@ def test_growth_takes_the_complex_twins_the_data_prefer_together():
 
 def test_one_warning_names_every_twin_the_data_cannot_tell_from_a_kept_term():
     from identification.fit import Gram
-    from identification.selection import indistinguishable_twins
+    from identification.support import indistinguishable_twins
 
     rng = np.random.default_rng(4)
     a, b, d1, d2 = rng.normal(size=(4, 4000))
@@ -1640,7 +1640,8 @@ def test_a_refit_model_that_diverges_gives_way_to_the_validated_candidate(other_
     """The checks after the selection (growth, pruning, bootstrap) change unscored terms; a
     trial with motor lag got a grown model that diverged 100 steps ahead, exit 0."""
     from identification.experiments.truth import truth_matrix
-    from identification.selection import _predicts_as_validated, score_scale
+    from identification.scoring import score_scale
+    from identification.selection import _predicts_as_validated
 
     names = planar_library()
     truth = truth_matrix(truth_planar(OTHER_PLANAR), PS, names)
@@ -1699,7 +1700,7 @@ def test_the_python_api_refuses_or_flags_what_the_cli_does(other_clean, tmp_path
         x = t.x.copy()
         x[:, 2] = np.angle(np.exp(1j * (x[:, 2] + 3.1)))
         wrapped.append(Trajectory(t.t, x, t.u, PS, PI))
-    from identification.selection import data_warnings
+    from identification.diagnostics import data_warnings
 
     assert any(w.startswith("phi jumps by 6.") for w in data_warnings(wrapped, planar_library()))
     assert not data_warnings(other_clean, planar_library())
@@ -1743,8 +1744,8 @@ def test_steps_where_inputs_did_not_act_as_logged_are_reported_and_cut_on_reques
     1e-3): the steps are named; selection keeps them by default (on real flights cutting
     them predicted held-out flights worse) and, asked to, cuts them out and finds the exact
     model that the applied inputs give."""
+    from identification.diagnostics import outlying_steps
     from identification.rollouts import excitation_rollouts
-    from identification.selection import outlying_steps
 
     veh = {"mass": "0.5", "Ixx": "3e-3", "arm_length": "0.15", "rotor_force_max": "4.905"}
     flown = excitation_rollouts("PlanarQuad-v0", 3, seed=1, env_kwargs={"params": veh})
@@ -1799,7 +1800,7 @@ def test_score_predicts_held_out_flights_against_an_analytic_reference(tmp_path,
     model predicts them to round-off; one whose gravity is 0.81 m/s^2 off misses z by
     0.81 t^2 / 2 = 0.405 m after 1 s from every start (nothing else depends on z)."""
     from identification.experiments.truth import truth_matrix
-    from identification.selection import held_out_errors
+    from identification.scoring import held_out_errors
 
     held = planar_flights(OTHER_PLANAR, FlightSpec(flights=2, steps=400, seed=11))
     names = planar_library()
@@ -1899,7 +1900,7 @@ def test_a_file_in_another_unit_among_the_others_is_named(tmp_path, other_clean)
     """One unit scales several variables by one factor (a trial's file in mm among files in
     m: no thrust or gravity in the model, with only outlier notes); flights of other kinds,
     each variable by its own factor, are not named."""
-    from identification.selection import data_warnings
+    from identification.diagnostics import data_warnings
 
     paths = [
         str(write_trajectory_csv(tmp_path / f"m{k}.csv", t)) for k, t in enumerate(other_clean)
@@ -1953,8 +1954,8 @@ def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean
     """White measurement noise in the targets shrinks about as 1 / window; a term the library
     lacks leaves the same residual at every window (a held-out trial's Z-Y-X log, 38
     stand-in terms and no warning)."""
+    from identification.diagnostics import misfit_note
     from identification.experiments.truth import truth_matrix
-    from identification.selection import misfit_note
 
     names = planar_library()
     exact = truth_matrix(truth_planar(OTHER_PLANAR), PS, names)
@@ -1974,7 +1975,7 @@ def test_centred_restart_replaces_a_support_built_around_a_cancelling_pair():
     on a held-out 6-DOF trial) is replaced by the true pair; the true support, and exact
     clean data (round-off residuals), are left alone."""
     from identification.fit import Gram
-    from identification.selection import restart_centred
+    from identification.support import restart_centred
 
     rng = np.random.default_rng(0)
     n = 3000
@@ -2008,7 +2009,7 @@ def test_exchange_and_add_replaces_a_stand_in_that_holds_two_true_terms(monkeypa
     neither exchanging it for `b` nor adding `c` alone gains enough); one exchange plus one
     addition reaches the exact pair. With the growth's pool cut to the chosen terms, only
     that move can find it."""
-    import identification.selection as selection
+    import identification.support as support
     from identification.fit import Gram
 
     rng = np.random.default_rng(0)
@@ -2021,11 +2022,11 @@ def test_exchange_and_add_replaces_a_stand_in_that_holds_two_true_terms(monkeypa
     unit = gram.r / gram.col_norms
     free = np.ones(len(names), dtype=bool)
     none = np.zeros((len(names), len(names)), dtype=bool)
-    assert selection.exchange_and_add(unit, gram.z[:, 0], [0], free, none)[1] == (1, 2)
-    monkeypatch.setattr(selection, "GROW_POOL", 0)
+    assert support.exchange_and_add(unit, gram.z[:, 0], [0], free, none)[1] == (1, 2)
+    monkeypatch.setattr(support, "GROW_POOL", 0)
     start = np.zeros((1, len(names)))
     start[0, 0] = 1.0
-    xi, notes = selection.grow_significant(start, gram, np.ones(1), names, ["s"])
+    xi, notes = support.grow_significant(start, gram, np.ones(1), names, ["s"])
     assert list(np.flatnonzero(xi[0])) == [1, 2]
     np.testing.assert_allclose(xi[0, [1, 2]], [1.0, 1.0], rtol=5e-3)
     assert "holds 'b', 'c' in place of 'a'" in notes[0]
@@ -2034,7 +2035,7 @@ def test_exchange_and_add_replaces_a_stand_in_that_holds_two_true_terms(monkeypa
 def test_a_model_records_its_training_range_and_score_names_data_beyond_it(tmp_path, other_clean):
     """Cross-validation tests a model only where its flights went; a held-out flight past
     that (a trial: yaw beyond the training range, 17.5 % at 1 s) is named by ``score``."""
-    from identification.selection import range_note
+    from identification.diagnostics import range_note
 
     model = fit(other_clean, planar_library(), FitConfig(lam=1e-3))
     ranges = model.meta["ranges"]
@@ -2115,7 +2116,8 @@ def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inpu
     input-shift check stays quiet: `score` named an input shift on such a model that only
     one equation gained by and the others lost far more (following it made the score 30
     times worse)."""
-    from identification.selection import input_shift_note, long_run_ratio, state_shift_note
+    from identification.diagnostics import input_shift_note, state_shift_note
+    from identification.support import long_run_ratio
 
     lagged = []
     for tr in other_clean:  # y_dot logged 2 rows late
@@ -2163,7 +2165,7 @@ def test_a_grown_term_that_fits_the_noise_bias_is_dropped_and_a_real_one_kept(ot
     collapses at a wider window; a real term the growth added (`u2` in `phi_dot'`) keeps its."""
     from identification.experiments.truth import truth_matrix
     from identification.fit import Gram, grams
-    from identification.selection import _refit, drop_window_bias
+    from identification.support import drop_window_bias, refit_support
 
     noisy = add_noise(other_clean, 1e-2, seed=3)
     names = planar_library()
@@ -2171,7 +2173,7 @@ def test_a_grown_term_that_fits_the_noise_bias_is_dropped_and_a_real_one_kept(ot
     gram = Gram.stack(grams(noisy, names, "rk4", 1, path))
     phi, j = PS.index("phi"), names.index("sin(phi)")
     grown = path.copy()
-    grown[phi] = _refit(gram, phi, [*np.flatnonzero(path[phi]), j])
+    grown[phi] = refit_support(gram, phi, [*np.flatnonzero(path[phi]), j])
     assert grown[phi, j] < -0.01  # the bias at window 1
     xi, notes = drop_window_bias(grown, path, gram, noisy, names, 4, PS, 1)
     assert xi[phi, j] == 0 and "dropped 'sin(phi)', which the growth added" in notes[0]

@@ -375,7 +375,7 @@ def truth_gaps(
     """
     from identification.experiments.truth import truth_matrix
     from identification.fit import Gram, grams
-    from identification.selection import _residual_variance
+    from identification.support import residual_variance
 
     names = list(model.feature_names)  # type: ignore[attr-defined]
     states = list(model.state_names)  # type: ignore[attr-defined]
@@ -387,8 +387,8 @@ def truth_gaps(
         true = np.flatnonzero(true_xi[i])
         if set(found) == set(true):
             continue
-        rss_true, sigma2 = _residual_variance(gram, i, true)
-        rss_found, _ = _residual_variance(gram, i, found)
+        rss_true, sigma2 = residual_variance(gram, i, true)
+        rss_found, _ = residual_variance(gram, i, found)
         out[state] = (rss_found - rss_true) / sigma2
     return out
 
@@ -402,7 +402,7 @@ def worse_than_truth(
     support but not listed here is one the data cannot tell from the truth; one listed is a
     miss of the search.
     """
-    from identification.selection import F_CRITICAL
+    from identification.support import F_CRITICAL
 
     return [s for s, gap in truth_gaps(model, truth, trajs, window).items() if gap > F_CRITICAL]
 

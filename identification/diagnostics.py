@@ -1,0 +1,690 @@
+"""What the data and a fitted model say about the log: notes and warnings, never fits.
+
+Every function here reads trajectories (and a model's coefficients) and returns notes for
+the user: outlying steps and the rows they cut, misfit that is not white noise, inputs or
+state columns logged late, an angle logged with an offset, time stamps noisier than their
+clock, frozen sensors, unit mismatches, and predictions outside the training range.
+:func:`identification.selection.select_model` issues them; ``score`` issues those that
+apply to a model it did not fit.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from identification.data import Trajectory, clock_line
+from identification.features import parse_term, term_name
+from identification.fit import (
+    Gram,
+    grams,
+    iter_rows,
+)
+from identification.model import IdentifiedModel
+from identification.scoring import MIN_UNIT_ROWS, long_enough
+from identification.support import residual_variance, significance_bar
+
+MISFIT_WINDOW, MISFIT_SHRINK, MISFIT_FLOOR = 16, 1.5, 1e-5
+"""An equation whose residual (relative to its target's spread, above the floor) shrinks by
+less than ``MISFIT_SHRINK`` from window 1 to window ``MISFIT_WINDOW`` is reported: white
+measurement noise in the residual shrinks about as 1 / window, misfit does not."""
+
+
+RANGE_MARGIN = 0.05
+"""A held-out value counts as outside the training range past this share of its span."""
+
+RANGE_ROWS = 0.05
+"""A variable is named when at least this share of the rows lie outside its range."""
+
+
+def range_note(model: IdentifiedModel, trajs: Sequence[Trajectory]) -> str:
+    """A warning naming the variables where ``trajs`` leave the model's training range.
+
+    The selection scores a model only on what its training flights span; a trial's 6-DOF
+    model, right where its flights went, drifted 17.5 % in 1 s on a held-out flight whose
+    yaw went past the training range. The inputs and the states the model's terms use are
+    checked (:meth:`IdentifiedModel.training_box`), each where :data:`RANGE_ROWS` of the
+    rows or more lie past :data:`RANGE_MARGIN` of the span. Empty where none does or the
+    model file has no ranges (files before 2026-11-26).
+    """
+    box = model.training_box()
+    if box is None or not trajs:
+        return ""
+    names = (*model.state_names, *model.input_names)
+    values = np.vstack([np.hstack([t.x, t.u]) for t in trajs])
+    out = []
+    for k in np.flatnonzero(np.isfinite(box[0])):  # a position no term reads may be anywhere
+        lo, hi = float(box[0][k]), float(box[1][k])
+        margin = RANGE_MARGIN * max(hi - lo, 1e-12)
+        column = values[:, k]
+        outside = (column < lo - margin) | (column > hi + margin)
+        if np.mean(outside) >= RANGE_ROWS:
+            far = column[outside][np.argmax(np.abs(column[outside] - 0.5 * (lo + hi)))]
+            out.append(f"{names[k]} to {far:.3g} (trained on {lo:.3g} to {hi:.3g}; "
+                       f"{np.mean(outside):.1%} of the rows outside)")  # fmt: skip
+    if not out:
+        return ""
+    return (
+        f"the data leave the model's training range: {'; '.join(out)}. The selection tested "
+        "the model only within that range: its errors there can be larger than its scores"
+    )
+
+
+OUTLIER_Z = 10.0
+"""A row stands out where its one-step residual departs from its neighbours' by more than this
+many robust deviations (Gaussian noise: a chance of 1e-23 per row)."""
+
+OUTLIER_FLOOR = 1e-3
+"""Departures under this share of the target's spread are not judged: on clean data the robust
+deviation is near round-off, and a fit bent by a few bad steps misfits its other steps by more
+(15 of 19 flags false on a trial's clean log before)."""
+
+
+def outlying_steps(
+    trajs: Sequence[Trajectory], names: list[str], derivative: str, xi: np.ndarray
+) -> dict[int, np.ndarray]:
+    """The steps whose residual stands out of their neighbours', per trajectory.
+
+    The residual of each step (window 1) under ``xi`` (a fit of the whole library, or the
+    selected model) is compared with the median of its 11 neighbours; a step stands out
+    where that departure exceeds :data:`OUTLIER_Z` robust deviations (1.4826 times the
+    median absolute departure, per equation, at least :data:`OUTLIER_FLOOR` of the target's
+    spread). Smooth misfit (a missing drag term) moves the neighbours too; an input that did
+    not act as logged (a command that saturated the rotors, a glitch) does not.
+
+    Returns:
+        {trajectory index: (rows, states) mask}, rows in the order :func:`iter_rows` yields
+        them (the observed steps); empty where nothing stands out or a formulation other
+        than the step-wise ones is used.
+    """
+    from scipy.ndimage import median_filter
+
+    if derivative not in ("rk4", "forward"):
+        return {}
+    parts: dict[int, list[np.ndarray]] = {}
+    targets = []
+    with np.errstate(all="ignore"):
+        for i, theta, y in iter_rows(trajs, names, derivative, 1, xi):
+            parts.setdefault(i, []).append(y - theta @ xi.T)
+            targets.append(y)
+        local = {}
+        for i, chunks in parts.items():
+            r = np.concatenate(chunks)
+            local[i] = r - median_filter(r, size=(11, 1), mode="nearest")
+        stacked = np.concatenate(list(local.values()))
+        if not np.all(np.isfinite(stacked)):
+            return {}
+        floor = OUTLIER_FLOOR * np.concatenate(targets).std(axis=0)
+        deviation = np.maximum(1.4826 * np.median(np.abs(stacked), axis=0), floor)
+        deviation = np.where(deviation > 0, deviation, 1.0)
+        flagged = {i: np.abs(v) / deviation > OUTLIER_Z for i, v in local.items()}
+    return {i: f for i, f in flagged.items() if f.any()}
+
+
+def _relative_residuals(
+    trajs: Sequence[Trajectory], names: list[str], derivative: str, window: int, xi: np.ndarray
+) -> np.ndarray:
+    """Per equation, the RMS residual of ``xi`` at ``window`` over the target's spread."""
+    total = np.zeros(xi.shape[0])
+    targets: list[np.ndarray] = []
+    count = 0
+    with np.errstate(all="ignore"):
+        for _, theta, y in iter_rows(trajs, names, derivative, window, xi):
+            total += np.sum((y - theta @ xi.T) ** 2, axis=0)
+            count += len(y)
+            targets.append(y)
+        spread = np.concatenate(targets).std(axis=0) if targets else np.ones(xi.shape[0])
+    return np.sqrt(total / max(count, 1)) / np.where(spread > 0, spread, 1.0)
+
+
+def misfit_note(
+    trajs: Sequence[Trajectory],
+    names: list[str],
+    derivative: str,
+    xi: np.ndarray,
+    outliers: bool = False,
+) -> str | None:
+    """A warning for equations whose residual is not white noise (see :data:`MISFIT_SHRINK`).
+
+    The residual of the model at window 1 and at :data:`MISFIT_WINDOW` is compared: white
+    measurement noise in the targets shrinks about as 1 / window, while a term the library
+    lacks (Z-Y-X angles logged under Z-X-Y names) leaves the same residual at every window.
+    Residuals at round-off (:data:`MISFIT_FLOOR`) are not judged. Filtered (time-correlated)
+    noise shrinks less too, so the note names that cause as well, and a few bad steps
+    (``outliers``: some were named) do not shrink either. A misfit well under the noise at
+    window 1 is not seen (a missing `cos(phi) u1` at sigma = 1e-3 and tilts of 0.3 rad).
+    """
+    if derivative not in ("rk4", "forward"):
+        return None
+    usable = long_enough(trajs, 4 * MISFIT_WINDOW)
+    if not usable:
+        return None
+    one = _relative_residuals(usable, names, derivative, 1, xi)
+    wide = _relative_residuals(usable, names, derivative, MISFIT_WINDOW, xi)
+    flagged = [i for i in range(len(one))
+               if one[i] > MISFIT_FLOOR and one[i] < MISFIT_SHRINK * wide[i]]  # fmt: skip
+    if not flagged:
+        return None
+    states = trajs[0].state_names
+    listed = ", ".join(f"{states[i]}' ({one[i]:.2g} at window 1, {wide[i]:.2g} at "
+                       f"{MISFIT_WINDOW})" for i in flagged)  # fmt: skip
+    return (
+        f"the residual of {listed} (a share of each target's spread) does not shrink with the "
+        "integral window as measurement noise does: the library may lack a term, the "
+        "variables may follow another convention (Z-Y-X angles, world-frame velocities), "
+        + ("the outlying steps named above may cause it, " if outliers else "")
+        + "or the states' noise is correlated in time (filtered estimates)"
+    )
+
+
+INPUT_SHIFTS = (-3, -2, -1, 1, 2, 3)
+"""Shifts of the inputs [rows] that :func:`input_shift_note` tries."""
+
+SHIFT_GAIN = 0.9
+"""A shift is named only where it leaves at most this share of an equation's residual."""
+
+
+def input_shift_note(
+    trajs: Sequence[Trajectory],
+    names: list[str],
+    window: int,
+    xi: np.ndarray,
+    ratio: np.ndarray,
+    command: str = "identify again",
+) -> str | None:
+    """A warning where the model's equations fit better with the inputs shifted a few rows.
+
+    A log that records each input a row late (a new-user trial: the 1-step delay of a
+    logger) is fitted with made-up damping and controller-shaped terms, and the model drifts
+    24 % of the roll range in 1 s; no other check named it. Each shift of
+    :data:`INPUT_SHIFTS` refits the model's own terms on the same rows (``max |shift|`` rows
+    cut at both ends of every segment) with the inputs taken that many rows later (or
+    earlier). A shift is named where, in an equation with an input term, it leaves at most
+    :data:`SHIFT_GAIN` of the residual and the drop passes the Bonferroni bar for the shifts
+    and equations tried (in residual variances, times the long-run ratio ``ratio``), and no
+    such equation fits worse by as much: a log's delay shifts every input, so on aligned
+    data every shift fits worse. On states with AR(1) noise (a trial: aligned inputs, the
+    model within 0.05 %) `score`, then without the long-run ratio, named a shift that made
+    `y_dot'` fit 15 to 30 % better and `z_dot'`, `phi_dot'` far worse; following it raised
+    the held-out score 30 times.
+    """
+    inputs = set(trajs[0].input_names)
+    variables = [*trajs[0].state_names, *trajs[0].input_names]
+    driven = [i for i in range(xi.shape[0])
+              if any(f.var in inputs for j in np.flatnonzero(xi[i])
+                     for f in parse_term(names[j], variables))]  # fmt: skip
+    margin = max(abs(d) for d in INPUT_SHIFTS)
+    usable = long_enough(trajs, window + 2 * margin + 2)
+    if not driven or not usable:
+        return None
+    refit = _own_terms_refit(xi, names, window, driven)
+
+    def residuals(shift: int) -> tuple[np.ndarray, np.ndarray]:
+        return refit([t.shift_inputs(shift, margin) for t in usable])
+
+    rss0, sigma0 = residuals(0)
+    bar = significance_bar(len(INPUT_SHIFTS) * len(driven))
+    scale = np.maximum(np.asarray(ratio, dtype=float)[driven], 1.0)
+    best: tuple[float, int, np.ndarray] | None = None
+    for shift in INPUT_SHIFTS:
+        rss, sigma2 = residuals(shift)
+        passes = (rss <= SHIFT_GAIN * rss0) & (rss0 - rss > bar * scale * sigma2)
+        worse = rss - rss0 > bar * scale * sigma0
+        if passes.any() and not worse.any():
+            share = float(np.min(rss / np.maximum(rss0, 1e-300)))
+            if best is None or share < best[0]:
+                best = (share, shift, rss / np.maximum(rss0, 1e-300))
+    if best is None:
+        return None
+    _, shift, shares = best
+    states = trajs[0].state_names
+    pairs = [(states[i], share) for i, share in zip(driven, shares, strict=True)]
+    listed = ", ".join(f"{s}' to {100 * r:.2g} %" for s, r in pairs if r <= SHIFT_GAIN)
+    applied = int(trajs[0].meta.get("input_shift", 0))  # already shifted by --input-shift
+    widest = max(INPUT_SHIFTS)
+    cause = (
+        "the log may record the inputs late"
+        if shift > 0
+        else "the actuators may lag (a motor's time constant: the library lacks it), the "
+        "states may be filtered estimates that lag the inputs (a low-pass filter or a state "
+        "estimator; no shift undoes a filter), or the log records the inputs early"
+    )
+    return (
+        f"the model's terms fit the data better with the inputs taken {abs(shift)} row(s) "
+        f"{'later' if shift > 0 else 'earlier'} (residual {listed}; shifts up to {widest} "
+        f"rows tried): {cause}; {command} with --input-shift {applied + shift} if the "
+        "log is off (the other warnings may be its symptoms)"
+    )
+
+
+def _own_terms_refit(xi: np.ndarray, names: Sequence[str], window: int, rows: Sequence[int]) -> Any:
+    """Per data set, RSS and residual variance of equations ``rows`` on the model's own terms.
+
+    Each equation is refitted on its terms in ``xi`` (RK4 rows at ``window``, stage points
+    from ``xi``): the shift notes compare the same model on shifted copies of the data.
+    """
+    cols = sorted({int(j) for j in np.flatnonzero(np.any(xi != 0, axis=0))})
+    sub, xs = [names[j] for j in cols], xi[:, cols]
+    supports = {i: [k for k, j in enumerate(cols) if xi[i, j] != 0] for i in rows}
+
+    def residuals(part: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
+        g = Gram.stack(grams(part, sub, "rk4", window, xs))
+        pairs = [residual_variance(g, i, supports[i]) for i in rows]
+        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+
+    return residuals
+
+
+def _state_taken_later(tr: Trajectory, state: int, rows: int, margin: int) -> Trajectory:
+    """``tr`` with state column ``state`` taken ``rows`` rows later, ``margin`` rows cut."""
+    part = tr.slice(margin, len(tr) - margin)
+    part.x = part.x.copy()
+    part.x[:, state] = tr.x[margin + rows : len(tr) - margin + rows, state]
+    return part
+
+
+def state_shift_note(
+    trajs: Sequence[Trajectory],
+    names: list[str],
+    window: int,
+    xi: np.ndarray,
+    ratio: np.ndarray,
+) -> str | None:
+    """A warning where the model's terms fit better with one state's column shifted a few rows.
+
+    Logged states are often a state estimator's output, and its velocity and rate estimates
+    lag the positions and angles (a trial's steady-state Kalman filter: about 2 rows). The
+    selection then builds the lag into the model (``phi' = phi_dot + 0.18 u2``, gravity 7 %
+    off, 18.7 % of the roll range at 1 s on clean flights) and no other check names it:
+    the inputs are aligned. Each state's column is taken each of :data:`INPUT_SHIFTS` rows
+    later (``max |shift|`` rows cut at both ends of every segment) and the model's own terms
+    refitted. A state is named where, in some equation, a shift leaves at most
+    :data:`SHIFT_GAIN` of the residual and the drop passes the Bonferroni bar for the states,
+    shifts and equations tried (in residual variances, times the long-run ratio ``ratio``),
+    and the equations the column enters gain together (the geometric mean of their residual
+    shares is under 1; an adversarial trial's 1-row lag of phi went unnamed while each
+    equation had to gain: a term the lag made up fitted 460 times worse once aligned): on
+    consistent data every shift of a column fits worse.
+    """
+    states = trajs[0].state_names
+    margin = max(abs(d) for d in INPUT_SHIFTS)
+    usable = long_enough(trajs, window + 2 * margin + 2)
+    rows = [i for i in range(xi.shape[0]) if np.any(xi[i])]
+    if not usable or not rows:
+        return None
+    residuals = _own_terms_refit(xi, names, window, rows)
+    rss0, sigma0 = residuals([t.slice(margin, len(t) - margin) for t in usable])
+    bar = significance_bar(len(states) * len(INPUT_SHIFTS) * len(rows))
+    scale = np.maximum(np.asarray(ratio, dtype=float)[rows], 1.0)
+    variables = [*states, *trajs[0].input_names]
+    reads = [{f.var for j in np.flatnonzero(xi[i]) for f in parse_term(names[j], variables)}
+             for i in rows]  # fmt: skip
+    found: list[tuple[float, int, int, np.ndarray]] = []
+    for s in range(len(states)):
+        # the equations the column enters: its own, and those whose terms read it (the RK4
+        # stage points couple the others only through the model's own error)
+        mine = np.array([i == s or states[s] in used for i, used in zip(rows, reads,
+                                                                         strict=True)])  # fmt: skip
+        best: tuple[float, int, int, np.ndarray] | None = None
+        for shift in INPUT_SHIFTS:
+            rss, sigma2 = residuals([_state_taken_later(t, s, shift, margin) for t in usable])
+            passes = mine & (rss <= SHIFT_GAIN * rss0) & (rss0 - rss > bar * scale * sigma2)
+            shares = np.where(mine, rss / np.maximum(rss0, 1e-300), 1.0)
+            # a term the lag made up (sin(phi) u2 in z') fits worse once the column is
+            # aligned: the equations it enters must gain together (their shares' geometric
+            # mean), not each one
+            gain = np.exp(np.mean(np.log(np.maximum(shares[mine], 1e-300))))
+            if passes.any() and gain < 1.0:
+                if best is None or shares.min() < best[0]:
+                    best = (float(shares.min()), s, shift, shares)
+        if best is not None:
+            found.append(best)
+    if not found:
+        return None
+    found.sort()
+    parts = []
+    for _, s, shift, shares in found[:3]:
+        listed = ", ".join(f"{states[i]}' to {100 * r:.2g} %"
+                           for i, r in zip(rows, shares, strict=True)
+                           if r <= SHIFT_GAIN)  # fmt: skip
+        when = "later" if shift > 0 else "earlier"
+        parts.append(f"{states[s]} taken {abs(shift)} row(s) {when} (residual {listed})")
+    return (
+        f"the model's terms fit the data better with {'; '.join(parts)}; shifts up to "
+        f"{max(INPUT_SHIFTS)} rows tried: the log's states are not simultaneous (a state "
+        "estimator's or filter's lag in some of them, velocities differentiated off-centre, "
+        "a sensor read late), and the model holds terms that stand in for the offset; align "
+        "the columns (or log the raw measurements) and identify again"
+    )
+
+
+def _step_rows(tr: Trajectory) -> np.ndarray:
+    """The rows whose steps :func:`iter_rows` yields at window 1 (both ends observed)."""
+    seen = tr.observed
+    return np.flatnonzero(seen[:-1] & seen[1:])
+
+
+def cut_steps(
+    trajs: Sequence[Trajectory], flagged: dict[int, np.ndarray]
+) -> tuple[list[Trajectory], int]:
+    """The trajectories split at the flagged steps; pieces under :data:`MIN_UNIT_ROWS` go.
+
+    Returns:
+        The pieces and the number of rows lost in pieces too short to keep.
+    """
+    out: list[Trajectory] = []
+    lost = 0
+    for i, tr in enumerate(trajs):
+        if i not in flagged:
+            out.append(tr)
+            continue
+        start = 0
+        for k in [*_step_rows(tr)[flagged[i].any(axis=1)], len(tr) - 1]:
+            stop = int(k) + 1  # the piece keeps sample k, not the step from k to k + 1
+            if stop - start >= MIN_UNIT_ROWS:
+                out.append(tr.slice(start, stop))
+            else:
+                lost += stop - start
+            start = stop
+    return out, lost
+
+
+def outlier_note(
+    trajs: Sequence[Trajectory], flagged: dict[int, np.ndarray], dropped: bool, lost: int = 0
+) -> str:
+    """What :func:`outlying_steps` found, and whether the steps were cut out."""
+    count = int(sum(f.any(axis=1).sum() for f in flagged.values()))
+    total = sum(len(_step_rows(t)) for t in trajs)
+    where = sorted({trajs[0].state_names[j] for f in flagged.values()
+                    for j in np.flatnonzero(f.any(axis=0))})  # fmt: skip
+    places = sorted((i, float(trajs[i].t[k])) for i, f in flagged.items()
+                    for k in _step_rows(trajs[i])[f.any(axis=1)])  # fmt: skip
+    several = len(trajs) > 1  # each segment's clock may start at 0: name the segment
+    shown = ", ".join(f"{t:.4g}" + (f" (segment {i + 1})" if several else "")
+                      for i, t in places[:6]) + (", ..." if len(places) > 6 else "")  # fmt: skip
+    found = (
+        f"{count} step(s) of {total} stand more than {OUTLIER_Z:g} robust deviations out of "
+        f"their neighbours' residuals in {', '.join(w + chr(39) for w in where)} "
+        f"(at t = {shown} s): inputs that did not act as logged (saturated actuators: log the "
+        "applied inputs), glitches, or abrupt effects the library lacks (gusts)"
+    )
+    if dropped:
+        lost_note = f"; {lost} rows in pieces too short to keep" if lost else ""
+        return f"cut out before selecting: {found}{lost_note}"
+    return (
+        f"{found}; kept (on real flights cutting them out predicted held-out flights worse): "
+        "--drop-outliers (drop_outliers=True) cuts them out"
+    )
+
+
+TRIG_KINDS = ("sin", "cos", "tan", "sec")
+
+
+def trig_variables(feature_names: Sequence[str]) -> set[str]:
+    """The variables a library puts inside sin, cos, tan or sec (its angles)."""
+    return {f.var for term in feature_names for f in parse_term(term) if f.kind in TRIG_KINDS}
+
+
+def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()) -> list[str]:
+    """Signs that the data are not in the units the fit assumes: seconds and radians.
+
+    A step of a second or more is a log in milliseconds read as seconds (rates 1000 times too
+    small); a variable inside sin/cos/tan/sec past 2 pi is an angle in degrees, or one that
+    turns several times (fine); one that jumps by about 2 pi between rows was wrapped.
+    """
+    notes = []
+    dt = float(np.median([t.dt for t in trajs]))
+    if dt >= 1.0:  # the unit that brings the step under a second
+        name, per = next((n, p) for n, p in (("nanoseconds", 1e9), ("microseconds", 1e6),
+                                             ("milliseconds", 1e3)) if dt >= p / 1e3)  # fmt: skip
+        flag = {"milliseconds": "ms", "microseconds": "us", "nanoseconds": "ns"}[name]
+        notes.append(
+            f"the time step is {dt:g} s: a log in {name} gives rates {per:g} times too small "
+            f"(say its unit: --time-unit {flag}, or time_unit={1 / per:g} in load_data)"
+        )
+    names = [*trajs[0].state_names, *trajs[0].input_names]
+    inside = trig_variables(feature_names)
+    peaks = np.max([np.abs(np.column_stack([t.x, t.u])).max(axis=0) for t in trajs], axis=0)
+    # a log that wrapped an angle at +-pi logged it in radians (a spinning flight)
+    wrapped = {n for t in trajs for n in t.meta.get("unwrapped", ())}
+    notes += [
+        f"{name} reaches {peak:.3g} inside sin/cos: angles are in radians (a log in degrees "
+        "gives wrong models: say its unit, --angle-unit deg or angle_unit=pi/180 in "
+        "load_data; an angle that turns several times is fine)"
+        for name, peak in zip(names, peaks, strict=True)
+        if name in inside and peak > 2 * np.pi and name not in wrapped
+    ]
+    notes += _frozen(trajs)
+    notes += _unit_mismatch(trajs, inside)
+    jumps = np.max([np.abs(np.diff(np.column_stack([t.x, t.u]), axis=0)).max(axis=0)
+                    for t in trajs], axis=0)  # fmt: skip
+    notes += [
+        f"{name} jumps by {jump:.3g} between two rows: a wrapped angle? Unwrap it (declare it "
+        "an angle: --angles, or clean(..., angles=...)), else its derivative is a spike"
+        for name, jump in zip(names, jumps, strict=True)
+        if name in inside and jump > 0.9 * 2 * np.pi
+    ]
+    return notes
+
+
+OFFSET_LIMIT = 0.3
+"""Largest rotation [rad] :func:`angle_offset_note` reads as an angle's offset."""
+
+
+def angle_offset_note(
+    xi: np.ndarray, names: Sequence[str], state_names: Sequence[str]
+) -> str | None:
+    """A note where two equations rotate the same factor by one angle's common offset.
+
+    A logged angle with a constant offset b (an IMU's mounting, an estimator's bias) turns
+    ``sin(phi) u1`` into ``cos(b) sin(phi) u1 - sin(b) cos(phi) u1``: a trial's 0.01 rad
+    gave ``y_dot' = -0.5555 sin(phi) u1 + 0.005555 cos(phi) u1`` and its twin in ``z_dot'``
+    (all P = 1.00) with no note; the model is right for logs with that offset, 2.1 % of the
+    range off at 1 s on flights without it. In an equation holding ``c_s sin(a) X + c_c
+    cos(a) X`` the pair is a sine shifted by atan2(c_c, c_s); where two equations or more
+    agree on that shift up to quarter turns (the physics' phases), by at most
+    :data:`OFFSET_LIMIT`, the angle is named with it: an offset, or an axis tilted by it.
+    """
+    found: dict[tuple[str, str], list[tuple[str, float]]] = {}
+    for i, state in enumerate(state_names):
+        pairs: dict[tuple[str, str], dict[str, float]] = {}
+        for j in np.flatnonzero(xi[i]):
+            term = parse_term(names[j])
+            trig = [f for f in term if f.kind in ("sin", "cos") and f.k == 1]
+            if len(trig) != 1 or sum(f.var == trig[0].var for f in term) != 1:
+                continue
+            rest = term_name(tuple(f for f in term if f is not trig[0]))
+            pairs.setdefault((trig[0].var, rest), {})[trig[0].kind] = float(xi[i, j])
+        for key, both in pairs.items():
+            if len(both) == 2:
+                turn = -np.arctan2(both["cos"], both["sin"])
+                shift = (turn + np.pi / 4) % (np.pi / 2) - np.pi / 4
+                found.setdefault(key, []).append((state, float(shift)))
+    for (angle, factor), seen in found.items():
+        shifts = np.array([b for _, b in seen])
+        small = np.abs(shifts)
+        if len(seen) < 2 or not (1e-4 < small.min() and small.max() < OFFSET_LIMIT):
+            continue
+        if np.ptp(shifts) > max(0.1 * np.abs(shifts).min(), 1e-4):
+            continue
+        offset = float(np.mean(shifts))
+        where = " and ".join(f"{state}'" for state, _ in seen)
+        return (
+            f"{where} hold sin({angle}) {factor} and cos({angle}) {factor} together as one "
+            f"sine shifted by {offset:.4g} rad: the logged {angle} may be offset by "
+            f"{offset:.4g} rad (an IMU's mounting, an estimator's bias; subtract it and "
+            f"identify again), or the vehicle's axis is tilted by it"
+        )
+    return None
+
+
+STAMP_JITTER = 1e-3
+"""Steps that vary by more than this share of the median step are tested as stamp jitter."""
+
+
+STAMP_FLOOR = 1e-8
+"""Below this residual share (summed over the equations) the stamps fit as they are: the
+comparison would be between round-offs."""
+
+
+def stamp_jitter(
+    trajs: Sequence[Trajectory], names: Sequence[str], own: Gram | None = None
+) -> tuple[list[Trajectory], str | None]:
+    """The trajectories on regular clocks where their jittery stamps fit worse, and a note.
+
+    Jittery stamps are of two kinds: samples taken at irregular times (each row's own step
+    is right) or a regular clock stamped with noise (message arrival times: each row's own
+    step is wrong by the noise). A trial's +-1 ms stamps on an exact 10 ms clock gave a
+    good model but 324 "outlying steps" and a misfit note blaming the library. The data
+    tell the two apart: a least-squares fit of the whole library on one-step differences
+    (window 1), with each row's own step and with each segment's stamps on the line through
+    them. Where the regular clock's residual is lower by more than the Bonferroni bar for
+    the equations (in residual variances), it is used and said; else the stamps are kept
+    (a first rule, at most half the residual, missed the same stamps under state noise
+    1e-3, whose held-out score was 20 times worse than on the true stamps). ``own``: the
+    one-step Gram on the stamps, where the caller has it.
+    """
+    steps = [np.diff(t.t) for t in trajs if len(t) > 3]
+    if not steps or max(np.ptp(h) / np.median(h) for h in steps) <= STAMP_JITTER:
+        return list(trajs), None
+    regular = [dataclasses.replace(t, t=clock_line(t.t)) if len(t) > 3 else t for t in trajs]
+
+    def residual(g: Gram) -> tuple[np.ndarray, float]:
+        """Per equation, the least-squares residual's share of the target; the rows left."""
+        total = np.sum(g.r_aug[:, g.p :] ** 2, axis=0)  # the targets' squares
+        explained = np.sum(g.z**2, axis=0)
+        shares = np.maximum(total - explained, 0.0) / np.maximum(total, 1e-300)
+        return shares, max(float(g.rows) - g.p, 1.0)
+
+    own = own if own is not None else Gram.stack(grams(trajs, list(names), "forward", 1))
+    own_eq = residual(own)[0]
+    grid_eq, rows = residual(Gram.stack(grams(regular, list(names), "forward", 1)))
+    # the clock must fit better by more than chance: the drop in residual variances of the
+    # clock's fit, summed over the equations, past the bar for the equations compared
+    drop = float(np.sum((own_eq - grid_eq) / np.maximum(grid_eq / rows, 1e-300)))
+    stamped, clocked = float(own_eq.sum()), float(grid_eq.sum())
+    if stamped <= STAMP_FLOOR or drop <= significance_bar(len(own_eq)):
+        return list(trajs), None
+    worst = max(float(np.max(np.abs(a.t - b.t))) for a, b in zip(trajs, regular, strict=True))
+    return regular, (
+        f"the time stamps jitter (up to {worst:.3g} s off a regular clock) but the data fit "
+        f"a regular clock better (residual {clocked / stamped:.2g} of the stamps' own steps'): "
+        "read as each segment's regular clock (stamps with noise, such as message arrival "
+        "times)"
+    )
+
+
+def _frozen(trajs: Sequence[Trajectory]) -> list[str]:
+    """Notes naming a state that holds one value over a whole file while it moves in others.
+
+    A sensor that froze (or a column a logger never filled) for a whole flight: a trial's
+    file with ``z`` stuck at 1.0 gave ``z' = 0.2095 y_dot`` with exit 0, and the notes blamed
+    outliers and the library. A flight that never moved that state (a vertical climb's
+    ``y``) holds it too, so this is a note, not a refusal.
+    """
+    sources: dict[str, list[Trajectory]] = {}
+    for tr in trajs:
+        sources.setdefault(str(tr.meta.get("source", "")), []).append(tr)
+    if len(sources) < 2:
+        return []
+    spread = {src: np.ptp(np.vstack([t.x for t in parts]), axis=0)
+              for src, parts in sources.items()}  # fmt: skip
+    notes = []
+    for j, name in enumerate(trajs[0].state_names):
+        still = [src for src, ptp in spread.items() if ptp[j] == 0]
+        if still and len(still) < len(spread):
+            value = sources[still[0]][0].x[0, j]
+            shown = ", ".join(Path(s).name or "(unnamed)" for s in still[:3])
+            notes.append(
+                f"{name} holds one value ({value:.6g}) over all of {shown} while it moves in "
+                f"the other files: a frozen or unfilled sensor gives wrong terms (leave that "
+                "file out); a flight that never moved it is fine"
+            )
+    return notes
+
+
+UNIT_FACTOR = 30.0
+"""A file whose variables' spreads differ from the median file's by at least this factor, the
+same for three or more variables (within a factor of 2), is named as logged in another unit;
+so is one whose operating level (a thrust at hover) differs by :data:`LEVEL_FACTOR`."""
+
+LEVEL_FACTOR = 5.0
+"""An input's operating level this many times off the other files' is a unit (kgf for N:
+9.81; a payload or a battery changes a hover thrust by tens of percent)."""
+
+
+def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) -> list[str]:
+    """Files that look logged in another unit than the others: one note per such file.
+
+    A unit changes some variables by one factor (mm for m: positions and velocities by 1000,
+    angles and rates as they were), where a flight of another amplitude changes them all: a
+    hover flight among tracking flights has velocities and rates 100 times smaller, and a
+    gentle one its rates and thrust 180 times (an adversarial trial: both were named). So
+    three or more variables off by one factor of :data:`UNIT_FACTOR` are named only where
+    some state is within 3 times of the median file's spread and no angle is among them (no
+    unit of length or time scales an angle; a vertical flight's small roll does). An input
+    with an operating level in every file (a thrust at hover, its median over 3 spreads from
+    zero) keeps that level whatever the flight: :data:`LEVEL_FACTOR` times off is a unit
+    (thrust in grams or kgf among files in newtons, which the spreads missed; positions are
+    left out, their origin is arbitrary). An angle inside sin/cos spread 30 to 100 times
+    more than in the others and past 1 rad is in degrees. A scale trial's 3 files in m and 1
+    in mm gave a model without thrust or gravity, worse than holding the state, with only
+    outlier notes; one in cm among 3 (80 to 180 times) went unnamed at a factor of 100.
+    """
+    by_file: dict[str, list[Trajectory]] = {}
+    for t in trajs:
+        by_file.setdefault(str(t.meta.get("source", "")), []).append(t)
+    if len(by_file) < 2 or "" in by_file:
+        return []
+    names = [*trajs[0].state_names, *trajs[0].input_names]
+    data = [np.vstack([np.column_stack([t.x, t.u]) for t in segs]) for segs in by_file.values()]
+    spread = np.array([np.std(d, axis=0) for d in data])
+    level = np.array([np.abs(np.median(d, axis=0)) for d in data])
+    peak = np.array([np.max(np.abs(d), axis=0) for d in data])
+    steady = np.all(level > 3 * spread, axis=0)  # an input's operating point; positions
+    steady[: len(trajs[0].state_names)] = False  # have an arbitrary origin (a trial: z = 25 m)
+    paths = list(by_file)
+    if len(paths) == 2:  # which of two is off cannot be told: the second, against the first
+        usual_spread, usual_level, judged = spread[0], level[0], [1]
+    else:  # against the median file, itself included: the median of the other two of three
+        # is their mean, half the odd file's (a trial's 3 files, one in cm: all 3 named)
+        usual_spread, usual_level = (np.exp(np.median(np.log(np.maximum(a, 1e-300)), axis=0))
+                                     for a in (spread, level))  # fmt: skip
+        judged = range(len(paths))
+    states = len(trajs[0].state_names)
+    notes = []
+    for i in judged:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            logs, levels = np.log10(spread[i] / usual_spread), level[i] / usual_level
+        said = []
+        far = np.flatnonzero(np.isfinite(logs) & (np.abs(logs) >= np.log10(UNIT_FACTOR)))
+        kept = np.isfinite(logs[:states]) & (np.abs(logs[:states]) <= np.log10(3.0))
+        if far.size >= 3 and kept.any():  # a unit leaves some states as they were
+            centre = np.median(logs[far])
+            same = far[np.abs(logs[far] - centre) <= np.log10(2.0)]
+            if same.size >= 3 and not {names[k] for k in same} & angles:  # no unit of length
+                # or time scales an angle; a flight of another kind does (a vertical one)
+                said.append(
+                    f"{', '.join(names[k] for k in same)} vary about "
+                    f"{10 ** abs(centre):.3g} times {'more' if centre > 0 else 'less'}"
+                )
+        for k in np.flatnonzero(steady & ((levels >= LEVEL_FACTOR) | (levels <= 1 / LEVEL_FACTOR))):
+            said.append(f"{names[k]} sits at {level[i, k]:.4g} against {usual_level[k]:.4g}")
+        for k, name in enumerate(names):
+            if name in angles and 30 <= 10 ** logs[k] <= 100 and peak[i, k] > 1.0:
+                said.append(
+                    f"{name} spreads {10 ** logs[k]:.3g} times more, to {peak[i, k]:.3g} (degrees?)"
+                )
+        if said:
+            where = paths[i] if len(paths) > 2 else f"{paths[1]} against {paths[0]}"
+            against = "the other files" if len(paths) > 2 else "it"
+            notes.append(
+                f"{where}: {'; '.join(said)}, against {against}: logged in another "
+                "unit (mm for m, g for N, degrees for radians)? Convert it, or leave "
+                "the file out"
+            )
+    return notes
