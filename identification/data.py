@@ -275,7 +275,7 @@ def data_ranges(trajs: Sequence[Trajectory]) -> dict[str, list[float]]:
     """Each state's and input's smallest and largest value over the data (stored in a model).
 
     A model is tested by its selection only where its training data went: a held-out log that
-    leaves these ranges asks it to extrapolate (:func:`identification.selection.range_note`).
+    leaves these ranges asks it to extrapolate (:func:`identification.diagnostics.range_note`).
     """
     first = trajs[0]
     values = np.vstack([np.hstack([t.x, t.u]) for t in trajs])
@@ -423,7 +423,8 @@ class CleanReport:
                 if self.regular
                 else ""
             )
-            + f"time-step jitter {100 * self.jitter:.1f} % (each row's own step is used)"
+            + f"time-step jitter {100 * self.jitter:.1f} % (each row's own step is used, "
+            "unless the data fit a regular clock better: a note then says so)"
             + "".join(f"; {note}" for note in _grouped(self.notes))
         )
 
