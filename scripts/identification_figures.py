@@ -15,6 +15,8 @@ import pysindy as ps
 
 from identification.data import IdentificationWarning
 from identification.experiments.synthetic import (
+    HEAVY_6DOF,
+    HEAVY_PLANAR,
     OTHER_6DOF,
     OTHER_PLANAR,
     FlightSpec,
@@ -33,10 +35,6 @@ from identification.experiments.synthetic import (
 from identification.fit import FitConfig
 from identification.libraries import planar_library, quad6dof_library
 from identification.selection import select_model
-from quad_envs.params import PlanarQuadParams, Quad6DOFParams
-
-HEAVY = PlanarQuadParams(mass=1.2, Ixx=8e-3, arm_length=0.2, rotor_force_max=1.2 * 9.81)
-"""A second non-paper planar vehicle (as in tests/test_selection.py)."""
 
 
 def sim_error_1s(model, clean_trajs, steps=100):
@@ -375,7 +373,7 @@ def sweep(seeds, config):
     # states (only the inputs scale): the second vehicle also flies solve_ivp data at 0.3 rad.
     vehicles = {
         "m=0.5 kg, RK4, tilt 0.2": (OTHER_PLANAR, {}),
-        "m=1.2 kg, solve_ivp, tilt 0.3": (HEAVY, {"integrator": "solve_ivp", "tilt": 0.3}),
+        "m=1.2 kg, solve_ivp, tilt 0.3": (HEAVY_PLANAR, {"integrator": "solve_ivp", "tilt": 0.3}),
     }
     met = {}
     for name, (params, spec) in vehicles.items():
@@ -400,14 +398,6 @@ def sweep(seeds, config):
                       flush=True)  # fmt: skip
     for (name, sigma), oks in met.items():
         print(f"{name}, sigma = {sigma:g}: goal met on {sum(oks)} of {len(oks)} seeds")
-
-
-HEAVY_6DOF = Quad6DOFParams(
-    mass=2.0, Jxx=2e-2, Jyy=2.4e-2, Jzz=3.6e-2, arm_length=0.3, rotor_force_max=2.0 * 9.81 / 2
-)
-"""A second non-paper 6-DOF vehicle: 2.5x the mass of OTHER_6DOF, 3-3.4x its inertia. (With
-J = diag(3, 4, 6)e-2 its yaw authority is half as large and the PD loses it at these
-references: the flight generator refuses such flights.)"""
 
 
 def sweep6(seeds, config):

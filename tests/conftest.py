@@ -13,3 +13,11 @@ def reference_case_c() -> np.ndarray:
     if not REFERENCE_CSV.exists():
         pytest.skip("../shared/reference is not present")
     return np.loadtxt(REFERENCE_CSV, delimiter=",")
+
+
+@pytest.fixture(scope="session")
+def other_clean():
+    """Three clean flights of 600 rows of a planar vehicle unlike the paper's."""
+    from identification.experiments.synthetic import OTHER_PLANAR, FlightSpec, planar_flights
+
+    return planar_flights(OTHER_PLANAR, FlightSpec(flights=3, steps=600))

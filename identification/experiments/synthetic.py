@@ -51,6 +51,16 @@ OTHER_6DOF = Quad6DOFParams(
 )
 """A 6-DOF vehicle unlike the paper's: 4.4x the mass, 24-32x the inertia."""
 
+HEAVY_PLANAR = PlanarQuadParams(mass=1.2, Ixx=8e-3, arm_length=0.2, rotor_force_max=1.2 * 9.81)
+"""A second non-paper planar vehicle: 6.7x the mass, 32x the inertia of the paper's."""
+
+HEAVY_6DOF = Quad6DOFParams(
+    mass=2.0, Jxx=2e-2, Jyy=2.4e-2, Jzz=3.6e-2, arm_length=0.3, rotor_force_max=2.0 * 9.81 / 2
+)
+"""A second non-paper 6-DOF vehicle: 2.5x the mass of OTHER_6DOF, 3-3.4x its inertia. (With
+J = diag(3, 4, 6)e-2 its yaw authority is half as large and the PD loses it at these
+references: the flight generator refuses such flights.)"""
+
 
 @dataclass(frozen=True)
 class FlightSpec:

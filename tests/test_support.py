@@ -1,0 +1,243 @@
+"""Settling a model's support on the normal equations (identification.support): F-tests."""
+
+import numpy as np
+import pytest
+
+from identification.data import (
+    Trajectory,
+)
+from identification.experiments.synthetic import (
+    OTHER_PLANAR,
+    add_noise,
+    truth_planar,
+)
+from identification.libraries import planar_library
+from quad_envs.dynamics import PLANAR_STATE_NAMES as PS
+
+
+def test_long_run_ratio_is_one_for_white_residuals_and_the_bartlett_sum_for_smooth_ones():
+    from identification.support import long_run_ratio
+
+    rng = np.random.default_rng(0)
+    n, dt, phi = 40_000, 0.01, 0.8
+    white = rng.normal(size=n)
+    smooth = np.zeros(n)
+    for k in range(1, n):
+        smooth[k] = phi * smooth[k - 1] + white[k]
+    trajs = []
+    for rate in (white, smooth):
+        x = np.concatenate([[0.0], np.cumsum(rate * dt)])[:, None]  # x' = rate (residual)
+        t = np.arange(n + 1) * dt
+        trajs.append(Trajectory(t, x, np.ones((n + 1, 1)), ("x",), ("u1",)))
+    xi = np.zeros((1, 1))  # the model x' = 0 * 1: the residual is the rate itself
+    assert long_run_ratio(trajs[:1], ["1"], xi, 1)[0] == pytest.approx(1.0, abs=0.05)
+    lags = 8  # window 1: Bartlett weights up to lag 8
+    expected = 1 + 2 * sum((1 - k / lags) * phi**k for k in range(1, lags))
+    assert long_run_ratio(trajs[1:], ["1"], xi, 1)[0] == pytest.approx(expected, rel=0.1)
+
+
+def test_pruning_drops_noise_terms_and_keeps_small_real_ones_against_the_long_run_variance():
+    from identification.fit import Gram
+    from identification.support import prune_insignificant
+
+    rng = np.random.default_rng(1)
+    n = 5000
+    theta = rng.normal(size=(n, 4))  # a1 (large), a2 (noise), a3 (small but real), a4 (noise)
+    y = 2.0 * theta[:, 0] + 0.05 * theta[:, 2] + 0.1 * rng.normal(size=n)
+    gram = Gram.from_rows(theta, y[:, None])
+    names = ["x", "y", "z", "w"]
+    xi = np.linalg.lstsq(theta, y, rcond=None)[0][None, :]  # all four in the model
+    pruned, notes = prune_insignificant(xi, gram, np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(pruned[0])) == [0, 2]  # a3 costs ~1250 variances: kept
+    assert "'y'" in notes[0] and "'w'" in notes[0]
+    # residuals 100 times more variable in the long run (smooth): a3 is no longer resolved
+    pruned, _ = prune_insignificant(xi, gram, np.array([100.0]), names, ["s"])
+    assert list(np.flatnonzero(pruned[0])) == [0]
+    np.testing.assert_allclose(pruned[0, 0], np.linalg.lstsq(theta[:, :1], y, rcond=None)[0])
+
+
+def test_growth_replaces_a_wrong_twin_and_adds_the_small_term_a_greedy_stop_missed():
+    """A support holding the twin `cos(phi) b` of the true `b` and missing the small `c`: the
+    best 3-term support in the pool is the truth; a support that is already right, beside 20
+    noise columns, does not grow."""
+    from identification.fit import Gram
+    from identification.support import grow_significant
+
+    rng = np.random.default_rng(0)
+    a, b, e, c = rng.normal(size=(4, 4000))
+    theta = np.column_stack([a, b, b + 0.01 * e, c, rng.normal(size=(4000, 20))])
+    names = ["a", "b", "cos(phi) b", "c", *(f"n{k}" for k in range(20))]
+    y = 3 * a + b + 0.1 * c + 0.05 * rng.normal(size=4000)
+    start = np.zeros((1, len(names)))
+    start[0, [0, 2]] = [3.0, 1.0]
+    xi, notes = grow_significant(start, Gram.from_rows(theta, y[:, None]), np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(xi[0])) == [0, 1, 3]
+    np.testing.assert_allclose(xi[0, [0, 1, 3]], [3.0, 1.0, 0.1], rtol=1e-2)
+    assert "holds 'b', 'c' in place of 'b cos(phi)'" in notes[0]
+    right = np.zeros((1, len(names)))
+    right[0, [0, 1]] = [3.0, 1.0]
+    y = 3 * a + b + 0.05 * rng.normal(size=4000)
+    xi, notes = grow_significant(right, Gram.from_rows(theta, y[:, None]), np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(xi[0])) == [0, 1] and notes == []
+
+
+def test_simpler_twins_are_taken_only_while_the_swaps_together_pass_the_f_test():
+    """Each swap to the simpler twin costs 8.6 and 6.6 residual variances alone (under the
+    F-test's 10.83), both together 15.1: one is taken, not both (before, each swap was tested
+    against the support left by the one before, and both were)."""
+    from identification.fit import Gram
+    from identification.support import resolve_collinear
+
+    rng = np.random.default_rng(1)
+    b1, b2, d1, d2 = rng.normal(size=(4, 4000))
+    c1, c2 = b1 + 0.02 * d1, b2 + 0.02 * d2  # |cos| = 0.9998 to their simple twins
+    theta = np.column_stack([b1, c1, b2, c2])
+    y = 0.095 * c1 + 0.12 * c2 + 0.05 * rng.normal(size=4000)
+    xi = np.zeros((1, 4))
+    xi[0, [1, 3]] = [0.095, 0.12]
+    names = ["u1", "cos(phi) u1", "u2", "cos(phi) u2"]
+    out, notes = resolve_collinear(xi, Gram.from_rows(theta, y[:, None]), names, ["s"], 1)
+    assert list(np.flatnonzero(out[0])) == [0, 3] and len(notes) == 1
+
+
+def test_a_simple_twin_gives_way_to_a_complex_one_the_data_prefer_past_the_f_test():
+    """The fit holds `u1`, the data were made by its twin `cos(phi) u1` (|cos| = 0.9998),
+    which fits about 57 residual variances better: exchanged, and not reported as a twin
+    that fits equally well (before, any twin that fit better was reported so)."""
+    from identification.fit import Gram
+    from identification.support import indistinguishable_twins, resolve_collinear
+
+    rng = np.random.default_rng(1)
+    b1, d1, noise = rng.normal(size=(3, 4000))
+    theta = np.column_stack([b1, b1 + 0.02 * d1])
+    y = 0.3 * theta[:, 1] + 0.05 * noise
+    gram = Gram.from_rows(theta, y[:, None])
+    xi = np.array([[0.3, 0.0]])
+    names = ["u1", "cos(phi) u1"]
+    notes, _ = indistinguishable_twins(xi, gram, names, ["s"], 1)
+    assert notes == []
+    out, resolved = resolve_collinear(xi, gram, names, ["s"], 1)
+    assert list(np.flatnonzero(out[0])) == [1] and abs(out[0, 1] / 0.3 - 1) < 1e-2
+    assert "kept 'cos(phi) u1' in place of" in resolved[0, 0, 1]
+
+
+def test_growth_takes_the_complex_twins_the_data_prefer_together():
+    """Both chosen terms are the simpler twins of the true ones; the best support of the same
+    size (the complex pair) fits 15 residual variances better, past the F-test: taken."""
+    from identification.fit import Gram
+    from identification.support import grow_significant
+
+    rng = np.random.default_rng(1)
+    b1, b2, d1, d2 = rng.normal(size=(4, 4000))
+    theta = np.column_stack([b1, b1 + 0.02 * d1, b2, b2 + 0.02 * d2])
+    y = 0.095 * theta[:, 1] + 0.12 * theta[:, 3] + 0.05 * rng.normal(size=4000)
+    xi = np.zeros((1, 4))
+    xi[0, [0, 2]] = [0.095, 0.12]
+    names = ["u1", "cos(phi) u1", "u2", "cos(phi) u2"]
+    out, notes = grow_significant(xi, Gram.from_rows(theta, y[:, None]), np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(out[0])) == [1, 3] and "in place of 'u1', 'u2'" in notes[0]
+
+
+def test_one_warning_names_every_twin_the_data_cannot_tell_from_a_kept_term():
+    from identification.fit import Gram
+    from identification.support import indistinguishable_twins
+
+    rng = np.random.default_rng(4)
+    a, b, d1, d2 = rng.normal(size=(4, 4000))
+    theta = np.column_stack([a, b, b + 1e-3 * d1, b + 1e-3 * d2])
+    names = ["a", "b", "cos(phi) b", "sin(phi) b"]
+    y = 2 * a + b + 0.05 * rng.normal(size=4000)
+    xi = np.array([[2.0, 1.0, 0.0, 0.0]])
+    notes, covered = indistinguishable_twins(xi, Gram.from_rows(theta, y[:, None]), names,
+                                             ["s"], 1)  # fmt: skip
+    assert len(notes) == 1 and covered == {(0, 1, 2), (0, 1, 3)}
+    assert notes[0].startswith("s': kept 'b'; its nearly collinear twins")
+    assert "'b cos(phi)' (" in notes[0] and "'b sin(phi)' (" in notes[0]
+
+
+def test_centred_restart_replaces_a_support_built_around_a_cancelling_pair():
+    """Thrust and gravity: `u1` and `cos(a)` both far from zero, the target their difference.
+    A support that builds the difference from yaw-modulated columns (what the greedy path did
+    on a held-out 6-DOF trial) is replaced by the true pair; the true support, and exact
+    clean data (round-off residuals), are left alone."""
+    from identification.fit import Gram
+    from identification.support import restart_centred
+
+    rng = np.random.default_rng(0)
+    n = 3000
+    t = np.arange(n) * 0.01
+    psi = 0.8 * np.sin(0.3 * t) + 0.5
+    c = np.cos(0.25 * np.sin(1.3 * t) * np.cos(0.7 * t))
+    u1 = 15 + 1.5 * np.sin(2.1 * t) + 0.3 * np.sin(5.3 * t)
+    cols = {"1": np.ones(n), "u1": u1, "cos(a)": c, "cos(b) u1": np.cos(psi) * u1,
+            "sin(b) u1": np.sin(psi) * u1, "cos(a) cos(b)": np.cos(psi) * c,
+            "cos(a) sin(b)": np.sin(psi) * c, "cos(b)": np.cos(psi),
+            "sin(b)": np.sin(psi)}  # fmt: skip
+    names = list(cols)
+    theta = np.column_stack(list(cols.values()))
+    exact = u1 / 1.5 - 9.81 * c
+    for noise in (1e-2, 0.0):
+        gram = Gram.from_rows(theta, (exact + noise * rng.normal(size=n))[:, None])
+        wrong = np.zeros((1, len(names)))
+        wrong[0, 3:9] = np.linalg.lstsq(theta[:, 3:9], exact, rcond=None)[0]
+        xi, notes = restart_centred(wrong, gram, np.ones(1), names, ["w"])
+        assert list(np.flatnonzero(xi[0])) == [1, 2], noise
+        np.testing.assert_allclose(xi[0, [1, 2]], [1 / 1.5, -9.81], rtol=1e-3)
+        assert "centred columns" in notes[0] and "in place of the path" in notes[0]
+        right = np.zeros((1, len(names)))
+        right[0, [1, 2]] = [1 / 1.5, -9.81]
+        same, notes = restart_centred(right, gram, np.ones(1), names, ["w"])
+        assert np.array_equal(same, right) and notes == []
+
+
+def test_exchange_and_add_replaces_a_stand_in_that_holds_two_true_terms(monkeypatch):
+    """`a` stands in for the true `b` and the small `c` together (the best single column, and
+    neither exchanging it for `b` nor adding `c` alone gains enough); one exchange plus one
+    addition reaches the exact pair. With the growth's pool cut to the chosen terms, only
+    that move can find it."""
+    import identification.support as support
+    from identification.fit import Gram
+
+    rng = np.random.default_rng(0)
+    n = 4000
+    b, c, hidden = rng.normal(size=(3, n))
+    c *= 0.3
+    theta = np.column_stack([b + c + 0.25 * hidden, b, c, rng.normal(size=(n, 8))])
+    names = ["a", "b", "c", *(f"n{k}" for k in range(8))]
+    gram = Gram.from_rows(theta, (b + c + 0.05 * rng.normal(size=n))[:, None])
+    unit = gram.r / gram.col_norms
+    free = np.ones(len(names), dtype=bool)
+    none = np.zeros((len(names), len(names)), dtype=bool)
+    assert support.exchange_and_add(unit, gram.z[:, 0], [0], free, none)[1] == (1, 2)
+    monkeypatch.setattr(support, "GROW_POOL", 0)
+    start = np.zeros((1, len(names)))
+    start[0, 0] = 1.0
+    xi, notes = support.grow_significant(start, gram, np.ones(1), names, ["s"])
+    assert list(np.flatnonzero(xi[0])) == [1, 2]
+    np.testing.assert_allclose(xi[0, [1, 2]], [1.0, 1.0], rtol=5e-3)
+    assert "holds 'b', 'c' in place of 'a'" in notes[0]
+
+
+def test_a_grown_term_that_fits_the_noise_bias_is_dropped_and_a_real_one_kept(other_clean):
+    """State noise biases a short window's fit (errors in variables): `sin(phi)` in `phi'`
+    took -0.077 at window 1 on 100 noisy flights and the growth kept it. Its coefficient
+    collapses at a wider window; a real term the growth added (`u2` in `phi_dot'`) keeps its."""
+    from identification.experiments.truth import truth_matrix
+    from identification.fit import Gram, grams
+    from identification.support import drop_window_bias, refit_support
+
+    noisy = add_noise(other_clean, 1e-2, seed=3)
+    names = planar_library()
+    path = truth_matrix(truth_planar(OTHER_PLANAR), PS, names)
+    gram = Gram.stack(grams(noisy, names, "rk4", 1, path))
+    phi, j = PS.index("phi"), names.index("sin(phi)")
+    grown = path.copy()
+    grown[phi] = refit_support(gram, phi, [*np.flatnonzero(path[phi]), j])
+    assert grown[phi, j] < -0.01  # the bias at window 1
+    xi, notes = drop_window_bias(grown, path, gram, noisy, names, 4, PS, 1)
+    assert xi[phi, j] == 0 and "dropped 'sin(phi)', which the growth added" in notes[0]
+    rate, u2 = PS.index("phi_dot"), names.index("u2")
+    without = path.copy()
+    without[rate, u2] = 0.0
+    xi, notes = drop_window_bias(path, without, gram, noisy, names, 4, PS, 1)
+    assert xi[rate, u2] != 0 and notes == []
