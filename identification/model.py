@@ -328,6 +328,10 @@ class IdentifiedModel:
         ]
         if missing:
             raise ValueError(f"{source}: missing field(s) {missing}")
+        if not isinstance(data.get("meta") or {}, dict):
+            raise ValueError(
+                f"{source}: meta must be a JSON object, got {type(data['meta']).__name__}"
+            )
         try:
             coefficients = np.array(data["coefficients"], dtype=np.float64)
         except (TypeError, ValueError):

@@ -26,17 +26,26 @@ def _umask() -> int:
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Writes data to a temporary file beside ``path`` and renames it into place.
 
+    A symbolic link is kept and the file it names is written (renaming onto the link would
+    replace the link itself); a device, FIFO or socket is refused, never replaced.
+
     Raises:
-        ValueError: ``path`` is a directory, or its folder cannot be created or written.
+        ValueError: ``path`` is a directory or not a regular file, or its folder cannot be
+            created or written.
     """
-    path = Path(path)
+    given = Path(path)
+    path = Path(os.path.realpath(given)) if given.is_symlink() else given
     if path.is_dir():
-        raise ValueError(f"{path} is a directory; give a file name")
+        raise ValueError(f"{given} is a directory; give a file name")
+    if path.exists() and not path.is_file():
+        raise ValueError(
+            f"{given} is not a regular file (a device, FIFO or socket); give a file name"
+        )
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     except OSError as exc:
-        raise ValueError(f"cannot write {path}: {exc.strerror}") from None
+        raise ValueError(f"cannot write {given}: {exc.strerror}") from None
     try:
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as handle:
@@ -47,7 +56,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    return path
+    return given
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:

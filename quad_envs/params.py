@@ -40,9 +40,8 @@ import numpy as np
 
 _G = 9.81
 
-_POSITIVE = ("mass", "Ixx", "Jxx", "Jyy", "Jzz", "arm_length")
+_POSITIVE = ("mass", "Ixx", "Jxx", "Jyy", "Jzz", "arm_length", "gravity")
 _NONNEGATIVE = (
-    "gravity",
     "rotor_force_min",
     "rotor_time_constant",
     "thrust_coefficient",

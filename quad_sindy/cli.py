@@ -65,11 +65,29 @@ def _writable_folder(folder: Path) -> None:
         _fail(f"cannot write to {folder}: {existing} is not writable")
 
 
-def _writable_file(path: Path) -> None:
-    """Fails unless a file can be written at ``path`` (checked before the work starts)."""
+def _writable_file(path: Path, inputs: tuple | list = (), flag: str = "--out") -> None:
+    """Fails unless a file can be written at ``path`` (checked before the work starts).
+
+    It fails too where ``path`` is one of the ``inputs``: the user's data would be overwritten.
+    """
     if path.is_dir():
         _fail(f"{path} is a directory; give a file name")
+    if path.exists() and not path.is_file():
+        _fail(f"{path} is not a regular file (a device, FIFO or socket); give a file name")
+    if any(p.exists() and path.exists() and os.path.samefile(p, path) for p in inputs):
+        _fail(f"{flag} {path} is one of the input files: writing it would overwrite the data")
     _writable_folder(path.parent)
+
+
+def _finite(flag: str, value: float, low: float = 0.0, strict: bool = True) -> None:
+    """Fails unless ``value`` is finite and above ``low`` (or at least ``low``)."""
+    if not (math.isfinite(value) and (value > low if strict else value >= low)):
+        bound = f"{'above' if strict else 'at least'} {low:g}"
+        _fail(f"{flag} must be a finite number {bound}, got {value}")
+
+
+MAX_ROWS = 10_000_000
+"""Most rows one ``simulate`` run writes (a CSV of about 2 GB)."""
 
 
 def _version(value: bool) -> None:
@@ -134,11 +152,18 @@ def simulate(
     fly another vehicle (the controller's gains scale to it), for example
     ``--param mass=0.5 --param Ixx=3e-3 --param rotor_force_max=4.9``.
     """
+    import numpy as np
+
     from quad_envs.fileio import write_csv
     from quad_envs.params import get_preset, with_changes
     from quad_envs.simulate import simulate_case
     from quad_envs.vehicles import get_vehicle
 
+    _finite("--dt", dt)
+    _finite("--duration", duration)
+    if duration / dt > MAX_ROWS:
+        _fail(f"--duration {duration:g} at --dt {dt:g} is {duration / dt:.3g} rows; at most "
+              f"{MAX_ROWS:,} per run")  # fmt: skip
     _writable_file(out)
     try:
         veh = get_vehicle(system.value)
@@ -153,8 +178,17 @@ def simulate(
     except ValueError as exc:
         _fail(str(exc))
     header, rows = run.table()
+    bad = ~np.isfinite(rows).all(axis=1)
+    if bad.any():
+        _fail(f"the simulation left finite numbers at t = {run.t[bad][0]:g} s (--dt {dt:g} "
+              "too coarse for the vehicle, or a parameter it cannot fly with)")  # fmt: skip
     write_csv(out, header, rows)
     typer.echo(f"wrote {len(rows)} rows to {out}")
+    angles = [i for i, n in enumerate(run.vehicle.state_names) if n in ("phi", "theta")]
+    worst = float(np.max(np.abs(run.states[:, angles]))) if angles else 0.0
+    if worst > np.pi / 2:
+        typer.echo(f"warning: the vehicle tumbled (a tilt of {worst:.3g} rad): its controller "
+                   f"does not hold it on this reference at --dt {dt:g}")  # fmt: skip
 
 
 FLIGHTS_IGNORE = {
@@ -200,12 +234,23 @@ def flights(
 
     if system not in ("planar", "quad6dof"):
         _fail(f"--system is planar or quad6dof, not {system!r}")
-    if noise < 0:
-        _fail(f"--noise must be non-negative, got {noise}")
-    if (count is not None and count < 1) or steps < 20 or not dt > 0:
-        _fail(f"--count must be positive, --steps at least 20 and --dt positive, got {count}, "
-              f"{steps} and {dt}")  # fmt: skip
+    if (count is not None and count < 1) or steps < 20:
+        _fail(f"--count must be positive and --steps at least 20, got {count} and {steps}")
+    _finite("--dt", dt)
+    _finite("--tilt", tilt)
+    for flag, value in (("--noise", noise), ("--excitation", excitation), ("--drag", drag)):
+        _finite(flag, value, strict=False)
+    if seed < 0:
+        _fail(f"--seed must be a non-negative integer, got {seed}")
     _writable_folder(out)
+    wanted = count or (3 if system == "planar" else 4)
+    stale = sorted(p.name for p in out.glob("flight_*.csv")
+                   if p.stem.removeprefix("flight_").isdigit()
+                   and int(p.stem.removeprefix("flight_")) >= wanted)  # fmt: skip
+    if stale:
+        _fail(f"{out} holds {', '.join(stale[:3])}{' ...' if len(stale) > 3 else ''} of an "
+              f"earlier run that {wanted} flight(s) would not replace, and {out}/flight_*.csv "
+              "would mix them: choose a new folder or remove them")  # fmt: skip
     try:
         params = get_preset(vehicle or "paper", system)
         changes = _vehicle_options(None, param).get("params")
@@ -218,8 +263,7 @@ def flights(
                     "drag: --drag; rotor lag and the other effects: the envs' effects= option)"
                 )
         check_can_hover(params)
-        default = 3 if system == "planar" else 4
-        spec = FlightSpec(flights=count or default, steps=steps, dt=dt,
+        spec = FlightSpec(flights=wanted, steps=steps, dt=dt,
                           integrator=integrator, open_loop=open_loop, tilt=tilt,
                           excitation=excitation, drag=drag, seed=seed)  # fmt: skip
         make = planar_flights if system == "planar" else quad6dof_flights
@@ -391,6 +435,9 @@ def identify(
 
     lam_value = _number_option("--lambda", lam, float, low=0.0) if lam != "auto" else None
     window_value = _number_option("--window", window, int, low=1) if window != "auto" else None
+    _writable_file(out, data)  # before the selection, which may take a minute
+    if lam_value is None and method != "paper":
+        _writable_file(plot or out.with_suffix(".png"), data, "--plot")
 
     try:
         preset = system.value if system else None
@@ -719,15 +766,18 @@ def show(
     typer.echo("\n".join(loaded.equations(precision=precision, latex=latex)))
     note = "% " if latex else ""
     sel = loaded.meta.get("selection")
-    if sel:
-        chosen = sel["chosen"]
-        typer.echo(
-            f"{note}selected: window {chosen['window']}, lambda {chosen['lambda']:g}, "
-            f"{chosen['n_terms']} terms{_after_checks(chosen['n_terms'], loaded.n_terms)}; "
-            f"rule: {sel['rule']}"
-        )
-        for warning in sel.get("warnings", []):
-            typer.echo(f"{note}warning: {warning}")
+    chosen = sel.get("chosen") if isinstance(sel, dict) else None
+    try:
+        line = (f"{note}selected: window {chosen['window']}, lambda {chosen['lambda']:g}, "
+                f"{chosen['n_terms']} terms{_after_checks(chosen['n_terms'], loaded.n_terms)}; "
+                f"rule: {sel['rule']}")  # fmt: skip
+    except (KeyError, TypeError, ValueError):  # no record of a selection, or an edited one
+        if sel:
+            typer.echo(f"{note}note: {model}: meta.selection is not a selection record; left out")
+        return
+    typer.echo(line)
+    for warning in sel.get("warnings", []):
+        typer.echo(f"{note}warning: {warning}")
 
 
 def _schema_of(path: Path) -> str | None:
@@ -845,6 +895,11 @@ def compare(
               "the model is --model")  # fmt: skip
     if not tolerance > 0:
         _fail(f"--tolerance must be positive, got {tolerance:g}")
+    import quad_envs
+
+    if env not in (*quad_envs.ENV_IDS, "CrazyflieMotors-v0"):
+        _fail(f"--env {env} is not a quadrotor env of this package; valid: "
+              f"{', '.join(quad_envs.ENV_IDS)}, CrazyflieMotors-v0")  # fmt: skip
     _writable_folder(out)
     try:
         identified = load_model(model)
@@ -1127,8 +1182,19 @@ def main() -> None:
     warnings.showwarning = _one_line_warning
     # The commands print a selection's notes themselves ("warning: ..."), once.
     warnings.simplefilter("ignore", IdentificationWarning)
+    usage_error = typer.BadParameter.__bases__[0]  # click's UsageError, as typer carries it
     try:
-        app()
+        code = app(standalone_mode=False)
+    except usage_error as exc:  # an unknown option, a value not among the choices, a missing one
+        if type(exc).__name__ == "NoArgsIsHelpError":  # a bare command group: its help
+            exc.show()
+            sys.exit(2)
+        message = exc.format_message().strip().splitlines()
+        typer.secho(f"error: {message[0] if message else exc} (see --help)",
+                    fg=typer.colors.RED, err=True)  # fmt: skip
+        sys.exit(2)
+    except typer.Abort:
+        sys.exit(1)
     except (*USER_ERRORS, gym.error.Error) as exc:
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         message = message.removeprefix("Error: ")  # stable-baselines3's own prefix
@@ -1138,6 +1204,10 @@ def main() -> None:
             message = f"an input file is not text ({exc.reason} at byte {exc.start})"
         typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
         sys.exit(2)
+    if code == 130:  # typer's exit for Ctrl-C
+        typer.secho("interrupted; what was written is kept (train, mbrl and study resume when "
+                    "rerun with the same command)", err=True)  # fmt: skip
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 benchmark_app = typer.Typer(no_args_is_help=True, help="Benchmarks on real flight data.")
@@ -1157,6 +1227,7 @@ def benchmark_nanodrone(
     """Identifies a Crazyflie from its flight logs and scores it on the nano-drone benchmark."""
     from identification.experiments.nanodrone import beats_published, run_benchmark
 
+    _writable_folder(out)  # before the fits, which take minutes
     try:
         metrics = run_benchmark(data, test, out, progress=not quiet)
     except (ValueError, OSError, FloatingPointError) as exc:

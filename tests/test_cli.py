@@ -1,5 +1,6 @@
 """The command line reports a user's mistake in one line with exit status 2."""
 
+import os
 import sys
 
 import gymnasium as gym
@@ -62,6 +63,24 @@ def ppo_zip(tmp_path_factory):
         (["compare", "--model", "{binary}", "--out", "{tmp}/c"], ["not text"]),
         (["identify", "{binary}", "--out", "{tmp}/m.json"], ["is not a text CSV file"]),
         (["identify", "{tmp}/bad.parquet", "--out", "{tmp}/m.json"], ["cannot read the log"]),
+        # a trial's values that gave NaN files, tracebacks or silent wrong flights
+        (["simulate", "--out", "{tmp}/c.csv", "--dt", "inf"], ["--dt must be a finite number"]),
+        (["simulate", "--out", "{tmp}/c.csv", "--dt", "nan"], ["--dt must be a finite number"]),
+        (["simulate", "--out", "{tmp}/c.csv", "--dt", "1e-9"], ["rows; at most"]),
+        (
+            ["simulate", "--out", "{tmp}/c.csv", "--param", "gravity=0"],
+            ["gravity must be positive"],
+        ),
+        (["simulate", "--out", "{tmp}/c.csv", "--system", "foo"], ["'--system'", "see --help"]),
+        (["flights", "--out", "{tmp}/f", "--noise", "nan"], ["--noise must be a finite number"]),
+        (["flights", "--out", "{tmp}/f", "--drag", "-1"], ["--drag must be a finite number"]),
+        (["flights", "--out", "{tmp}/f", "--tilt", "-1"], ["--tilt must be a finite number"]),
+        (["flights", "--out", "{tmp}/f", "--steps", "40", "--dt", "5"], ["tumbled"]),
+        (
+            ["compare", "--model", "{file}", "--env", "CartPole-v1", "--out", "{tmp}/c"],
+            ["not a quadrotor env"],
+        ),
+        (["reproduce", "--authors-csv", "{binary}", "--out", "{tmp}/r"], ["not a text CSV"]),
     ],
 )
 def test_user_mistakes_get_one_line(monkeypatch, capsys, tmp_path, args, fragments):
@@ -282,3 +301,46 @@ def test_compare_refuses_settings_a_trial_got_wrong_answers_from(
                            "--out", str(tmp_path / "cmp"))  # fmt: skip
     assert_one_line_error(code, err, *fragments)
     assert not (tmp_path / "cmp").exists()
+
+
+def test_outputs_never_replace_the_data_a_special_file_or_an_earlier_runs_flights(
+    monkeypatch, capsys, tmp_path
+):
+    """A trial's `identify a.csv b.csv --out a.csv` turned the user's log into the model (exit
+    0), `--plot` likewise; `--out` onto a FIFO replaced it; a second `flights` run with fewer
+    flights left the first run's files for `identify OUT/flight_*.csv` to mix (z_dot' = 0)."""
+    flights = tmp_path / "f"
+    code, _, _ = run_cli(monkeypatch, capsys, "flights", "--out", str(flights), "--steps", "60")
+    assert code in (0, None)
+    logs = sorted(map(str, flights.glob("flight_*.csv")))
+    before = [open(p).read() for p in logs]
+    for flag in ("--out", "--plot"):
+        extra = ["--out", str(tmp_path / "m.json")] if flag == "--plot" else []
+        code, _, err = run_cli(monkeypatch, capsys, "identify", *logs, *extra, flag, logs[0])
+        assert_one_line_error(code, err, f"{flag} {logs[0]} is one of the input files")
+    assert [open(p).read() for p in logs] == before
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    code, _, err = run_cli(monkeypatch, capsys, "identify", *logs, "--out", str(fifo))
+    assert_one_line_error(code, err, "not a regular file")
+    code, _, err = run_cli(monkeypatch, capsys, "flights", "--out", str(flights), "--count", "1",
+                           "--steps", "60")  # fmt: skip
+    assert_one_line_error(code, err, "flight_1.csv, flight_2.csv of an earlier run")
+
+
+def test_show_leaves_out_a_selection_record_a_user_edited(monkeypatch, capsys, tmp_path):
+    """`show` on a model whose meta.selection lacks its keys raised KeyError (a trial)."""
+    import json
+
+    from identification.experiments.truth import model_from_truth
+
+    data = model_from_truth("planar").to_dict()
+    data["meta"] = {"selection": {"chosen": {}}}
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(data))
+    code, out, _ = run_cli(monkeypatch, capsys, "show", str(path))
+    assert code in (0, None) and "not a selection record" in out
+    data["meta"] = "abc"
+    path.write_text(json.dumps(data))
+    code, _, err = run_cli(monkeypatch, capsys, "show", str(path))
+    assert_one_line_error(code, err, "meta must be a JSON object")

@@ -36,3 +36,19 @@ def test_unwritable_targets_raise_one_line_errors(tmp_path):
     not_a_folder.write_text("")
     with pytest.raises(ValueError, match="cannot write"):
         write_json(not_a_folder / "x.json", {})
+
+
+def test_a_link_is_written_through_and_special_files_are_refused_not_replaced(tmp_path):
+    """Renaming onto a path replaces whatever is there: a user's symbolic link became a plain
+    file (its target unwritten), and a FIFO (as root, /dev/full) was replaced (a trial)."""
+    target = tmp_path / "real.json"
+    target.write_text("{}")
+    link = tmp_path / "link.json"
+    link.symlink_to(target)
+    write_json(link, {"x": 1})
+    assert link.is_symlink() and json.loads(target.read_text()) == {"x": 1}
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    with pytest.raises(ValueError, match="pipe is not a regular file"):
+        write_json(fifo, {})
+    assert stat.S_ISFIFO(fifo.stat().st_mode)

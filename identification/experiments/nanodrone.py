@@ -390,8 +390,9 @@ def run_benchmark(
     fit_paths, val_paths = split_flights(train_paths)
     if not fit_paths or not val_paths:
         raise ValueError(
-            f"need at least two training flights of some family in {data_dir}, "
-            f"got {len(train_paths)}"
+            f"need at least two training flights of some family in {data_dir}, got "
+            f"{len(train_paths)} after holding out the test flight(s) "
+            f"{', '.join(p.name for p in test_paths)}"
         )
     steps = len(taus) * (iterations // 2 + 3)
     steps += (len(prune_fractions) + int(refit_all)) * (iterations + 6) + 12

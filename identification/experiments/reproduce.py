@@ -87,6 +87,9 @@ def run(
 ) -> dict[str, Any]:
     """Runs the reproduction; returns the metrics (also written to ``out/metrics.json``)."""
     out = Path(out)
+    authored = None  # read first: a file that is not the authors' fails before any work
+    if authors_csv is not None and Path(authors_csv).exists():
+        authored = [read_csv(authors_csv, AUTHORS_COLUMNS)]
     out.mkdir(parents=True, exist_ok=True)
     lib = planar_library()
     truth = planar_truth()
@@ -145,9 +148,9 @@ def run(
         plot_abs_error(closed, out / f"abs_error_{label}.png", f"|identified - truth|, {label}")
 
     authors = None
-    if authors_csv is not None and Path(authors_csv).exists():
+    if authored is not None:
         echo(f"fitting the authors' own case C file {authors_csv}")
-        data = [read_csv(authors_csv, AUTHORS_COLUMNS)]
+        data = authored
         best = selection.best
         chosen = FitConfig(optimizer=ours.meta["optimizer"], lam=best.lam, window=best.window)
         ours_a = fit(data, lib, chosen, "planar")

@@ -91,6 +91,16 @@ class FlightSpec:
     def __post_init__(self) -> None:
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"unknown integrator {self.integrator!r}; valid: {INTEGRATORS}")
+        if self.flights < 1 or self.steps < 2 or self.seed < 0:
+            raise ValueError(f"flights and steps must be positive and seed non-negative, got "
+                             f"{self.flights}, {self.steps} and {self.seed}")  # fmt: skip
+        if not (np.isfinite(self.dt) and self.dt > 0 and np.isfinite(self.tilt) and self.tilt > 0):
+            raise ValueError(f"dt and tilt must be finite and positive, got {self.dt} and "
+                             f"{self.tilt}")  # fmt: skip
+        if not (np.isfinite(self.excitation) and self.excitation >= 0 and np.isfinite(self.drag)
+                and self.drag >= 0):  # fmt: skip
+            raise ValueError(f"excitation and drag must be finite and non-negative, got "
+                             f"{self.excitation} and {self.drag}")  # fmt: skip
 
 
 def _step(
@@ -220,6 +230,7 @@ def planar_flights(
                 (half, 1.0 + half), 1.5,
             )  # fmt: skip
             states, applied = _fly(rhs, sat, PlanarPD(params), ref(t), None, x0, noise, spec)
+        _check_held(states[:, 2:3], len(trajs), spec)
         trajs.append(
             Trajectory(t, states, applied, PLANAR_STATE_NAMES, PLANAR_INPUT_NAMES, meta={})
         )
@@ -227,7 +238,20 @@ def planar_flights(
 
 
 MAX_FLIGHT_TILT = 1.2
-"""A 6-DOF flight tilting past this [rad] has been lost by the small-angle PD: refused."""
+"""A flight tilting past this [rad] has been lost by the small-angle PD: refused."""
+
+
+def _check_held(tilts: np.ndarray, index: int, spec: FlightSpec) -> None:
+    """Refuses a flight whose roll or pitch left :data:`MAX_FLIGHT_TILT` (or finite numbers)."""
+    worst = float(np.max(np.abs(tilts))) if np.isfinite(tilts).all() else np.inf
+    if not worst < MAX_FLIGHT_TILT:
+        raise ValueError(
+            f"flight {index} of this vehicle tumbled (roll or pitch past {MAX_FLIGHT_TILT} rad, "
+            f"{worst:.3g} at worst): the PD lost it (saturated rotors, or a step of "
+            f"{spec.dt:g} s too coarse for it); lower the tilt (now {spec.tilt}) or the step, or "
+            "give the vehicle more control authority (rotor_force_max; arm_length for roll and "
+            "pitch, gamma for yaw)"
+        )
 
 
 def quad6dof_flights(
@@ -269,14 +293,7 @@ def quad6dof_flights(
             )  # fmt: skip
             ctrl = Quad6DOFPD(params)
             states, applied = _fly(rhs, sat, ctrl, ref(t), None, x0, noise, spec)
-        worst = float(np.max(np.abs(states[:, 3:5])))
-        if not worst < MAX_FLIGHT_TILT:
-            raise ValueError(
-                f"flight {len(trajs)} of this vehicle tumbled (roll or pitch past "
-                f"{MAX_FLIGHT_TILT} rad, {worst:.3g} at worst): the PD lost it "
-                f"(saturated rotors); lower the tilt (now {spec.tilt}) or give the vehicle more "
-                "control authority (rotor_force_max; arm_length for roll and pitch, gamma for yaw)"
-            )
+        _check_held(states[:, 3:5], len(trajs), spec)
         trajs.append(
             Trajectory(t, states, applied, QUAD6DOF_STATE_NAMES, QUAD6DOF_INPUT_NAMES, meta={})
         )
