@@ -223,6 +223,10 @@ def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean
     for sigma in (1e-3, 1e-2):
         noisy = add_noise(other_clean, sigma, seed=3)
         assert misfit_note(noisy, names, "rk4", exact) is None, sigma
+    # at dt = 0.005 the noise fills the targets at both windows: the shares of an exact model
+    # stay near 1 (a trial's false notes), but the residuals shrink as white noise's do
+    fine = planar_flights(OTHER_PLANAR, FlightSpec(flights=2, steps=500, dt=0.005))
+    assert misfit_note(add_noise(fine, 1e-2, seed=0), names, "rk4", exact) is None
     lacking = [n for n in names if n != "cos(phi) u1"]
     _, report = select_model(other_clean, lacking, **FAST)
     said = [w for w in report.warnings if "does not shrink with the integral window" in w]
