@@ -220,7 +220,9 @@ def _swap_twins(
     """
     norms2 = np.einsum("ij,ij->j", a, a) if norms2 is None else norms2
     changed = False
-    for _ in range(2 * len(support)):
+    limit = 2 * len(support)
+    history = [tuple(support)]  # support after each swap; a swap depends on the support only
+    for step in range(limit):
         twins = {
             pos: ([t for t in simpler.get(c, ()) if t not in support],
                   [t for t in complex_of.get(c, ()) if t not in support])
@@ -254,6 +256,13 @@ def _swap_twins(
             break
         support[swap[0]] = swap[1]
         changed = True
+        state = tuple(support)
+        if state in history:  # a cycle of swaps: go round it to where the limit would stop
+            start = history.index(state)
+            period = step + 1 - start
+            support[:] = history[start + (limit - start) % period]
+            break
+        history.append(state)
     return changed
 
 
