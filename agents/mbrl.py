@@ -35,7 +35,7 @@ import numpy as np
 from agents.parallel import run_jobs
 from agents.policies import OrnsteinUhlenbeckPolicy, SB3Policy
 from agents.tasks import task_kwargs
-from agents.train import ALGOS, canonical, evaluate, make_algo, train
+from agents.train import ALGOS, canonical, evaluate, make_algo, make_env, train
 from identification.data import IdentificationWarning, Trajectory
 from identification.fit import FitConfig, fit
 from identification.libraries import default_library
@@ -100,6 +100,13 @@ class MBRLConfig:
         if self.ensemble_mode not in ENSEMBLE_MODES:
             raise ValueError(f"unknown ensemble mode {self.ensemble_mode!r}: {ENSEMBLE_MODES}")
         task_kwargs(self.task)  # raises on an unknown task
+        if self.disagreement is not None and not (
+            np.isfinite(self.disagreement) and self.disagreement >= 0
+        ):
+            raise ValueError(
+                f"disagreement must be a finite number >= 0 (None: never truncate), "
+                f"got {self.disagreement!r}"
+            )
         counts = ("iterations", "initial_real_steps", "real_steps_per_iteration",
                   "model_steps_per_iteration", "baseline_steps", "baseline_evals",
                   "eval_episodes", "ensemble")  # fmt: skip
@@ -345,6 +352,11 @@ def run_experiment(
     seed_list = list(range(seeds)) if isinstance(seeds, int) else [int(s) for s in seeds]
     if not seed_list:
         raise ValueError("need at least one seed")
+    if int(workers) != workers or workers < 1:
+        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    # the ground truth must be a quadrotor env taking the task: checked before config.json
+    # is written (a failed start left a folder that refused the next, valid run)
+    make_env(config.env_id, **config.truth_kwargs).close()
     runs_dir = out / "runs"
     settings = {**dataclasses.asdict(config), "seeds": seed_list}
     config_path = out / "config.json"
@@ -353,23 +365,27 @@ def run_experiment(
         # as values (params "4e-3" and "0.004" are one vehicle)
         # a setting added since that run was saved held its default value there
         defaults = dataclasses.asdict(MBRLConfig())
-        saved = canonical({**defaults, **json.loads(config_path.read_text())})
+        what, fix = "an experiment configuration", "use a new --out"
+        saved = _read_json(config_path, what, fix)
+        if not isinstance(saved, dict):
+            raise ValueError(f"{config_path} is not {what} (not a JSON object): {fix}")
+        saved = canonical({**defaults, **saved})
         now = canonical(json.loads(json.dumps(settings)))
         differ = sorted(k for k in {*saved, *now} - {"seeds"} if saved.get(k) != now.get(k))
         if differ:
             named = "; ".join(f"{k}: {saved.get(k)!r} there, {now.get(k)!r} here" for k in differ)
             raise ValueError(f"{out} holds an experiment with another configuration ({named}); "
                              "use a new --out")  # fmt: skip
-    write_json(config_path, settings)
     runs: dict[str, dict[int, dict[str, Any]]] = {m: {} for m in METHODS}
     todo = []
     for method in METHODS:
         for seed in seed_list:
             path = runs_dir / f"{method}_seed{seed}.json"
             if path.exists():
-                runs[method][seed] = json.loads(path.read_text())
+                runs[method][seed] = _finished_run(path)
             else:
                 todo.append((method, config, seed, str(runs_dir)))
+    write_json(config_path, settings)
     echo(f"{len(todo)} jobs to run, {2 * len(seed_list) - len(todo)} loaded from {runs_dir}")
 
     def save(index: int, result: dict[str, Any]) -> None:
@@ -382,9 +398,7 @@ def run_experiment(
     run_jobs(run_job, todo, workers, address, on_done=save)
     wall = time.perf_counter() - started
     # each session's jobs and time, so a resume keeps what the earlier runs took
-    previous = out / "mbrl.json"
-    before = json.loads(previous.read_text()) if previous.exists() else {}
-    sessions = before.get("sessions", [before["run"]] if "run" in before else [])
+    sessions = _sessions(out / "mbrl.json")
     sessions.append({"jobs": len(todo), "workers": workers, "wall_seconds": wall})
     results = {
         "config": settings,
@@ -400,6 +414,56 @@ def run_experiment(
     write_json(out / "mbrl.json", results)
     plot_curves(results, out / "mbrl.png")
     return results
+
+
+def _read_json(path: Path, what: str, fix: str) -> Any:
+    """The JSON in ``path``, or a ValueError naming the file (empty, truncated, not text)."""
+    try:
+        return json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        reason = "it is empty" if not path.stat().st_size else f"not JSON: {exc}"
+        raise ValueError(f"{path} is not {what} ({reason}): {fix}") from None
+
+
+def _finished_run(path: Path) -> dict[str, Any]:
+    """A saved job's result; a ValueError naming the file if it is not a finished run."""
+    fix = "remove it to rerun that job"
+    run = _read_json(path, "a finished run record", fix)
+    curve = run.get("curve") if isinstance(run, dict) else None
+    if not isinstance(curve, list) or not curve:
+        raise ValueError(f"{path} is not a finished run record (no 'curve'): {fix}")
+    for point in curve:
+        values = [point.get(k) if isinstance(point, dict) else None for k in CURVE_KEYS]
+        if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
+            raise ValueError(
+                f"{path} is not a finished run record (a 'curve' point without the numbers "
+                f"{' and '.join(CURVE_KEYS)}: {point!r}): {fix}"
+            )
+    return run
+
+
+CURVE_KEYS = ("real_steps", "return_mean")
+"""What every point of a job's learning curve holds (the summary and the plot read them)."""
+
+
+def _sessions(previous: Path) -> list[dict[str, Any]]:
+    """The sessions (jobs, workers, wall time) recorded in an earlier ``mbrl.json``.
+
+    ``mbrl.json`` is an output, written anew at the end: an unreadable one loses only the
+    earlier sessions' times.
+    """
+    try:
+        before = json.loads(previous.read_text()) if previous.exists() else {}
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        before = {}
+    if not isinstance(before, dict):
+        return []
+    sessions = before.get("sessions", [before["run"]] if "run" in before else [])
+    if not isinstance(sessions, list):
+        return []
+    numbers = (int, float)
+    return [s for s in sessions if isinstance(s, dict) and isinstance(s.get("jobs"), numbers)
+            and isinstance(s.get("wall_seconds"), numbers)]  # fmt: skip
 
 
 def plot_curves(results: dict[str, Any], path: Path) -> None:

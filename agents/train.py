@@ -13,10 +13,10 @@ import numpy as np
 
 import identification  # noqa: F401 (registers the surrogate ids)
 from agents.tasks import HOVER_TASK, task_kwargs
-from quad_envs.fileio import write_csv, write_json
+from quad_envs.fileio import file_mode, write_csv, write_json
 
 ALGOS = ("ppo", "sac")
-__all__ = ["ALGOS", "HOVER_TASK", "evaluate", "load_agent", "make_algo", "train"]
+__all__ = ["ALGOS", "HOVER_TASK", "check_seed", "evaluate", "load_agent", "make_algo", "train"]
 
 
 def make_algo(algo: str, env: gym.Env, seed: int = 0, **kwargs: Any) -> Any:
@@ -60,6 +60,20 @@ def _positive(**values: int) -> None:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
 
 
+MAX_SEED = 2**32 - 1
+"""Largest seed numpy's and stable-baselines3's seeding takes."""
+
+
+def check_seed(seed: int, name: str = "seed") -> None:
+    """Raises ValueError unless ``seed`` is a whole number in [0, :data:`MAX_SEED`]."""
+    if (
+        isinstance(seed, bool)
+        or not isinstance(seed, int | np.integer)
+        or not 0 <= seed <= MAX_SEED
+    ):
+        raise ValueError(f"{name} must be an integer from 0 to 2**32 - 1, got {seed!r}")
+
+
 def saved_algo(path: str | Path) -> str:
     """The algorithm (``ppo`` or ``sac``) of a model saved by stable-baselines3.
 
@@ -92,10 +106,14 @@ def load_agent(path: str | Path, algo: str | None = None) -> Any:
 
 
 def _save(model: Any, path: Path) -> None:
-    """Saves an agent atomically, readable by others (a killed run leaves no half file)."""
+    """Saves an agent atomically (a killed run leaves no half file).
+
+    Its permissions are those of the other outputs (0666 less the umask, as
+    :mod:`quad_envs.fileio` writes them), not a fixed mode.
+    """
     partial = path.with_name(f".{path.stem}.partial.zip")
     model.save(partial)
-    partial.chmod(0o644)
+    partial.chmod(file_mode())
     os.replace(partial, path)
 
 
@@ -130,10 +148,17 @@ def _resume(out: Path, config: dict[str, Any], env: gym.Env) -> tuple[Any, list]
         return None, []
     model = load_agent(source, config["algo"])
     model.set_env(env)
-    lines = (out / "learning_curve.csv").read_text().splitlines()[1:] \
-        if (out / "learning_curve.csv").exists() else []  # fmt: skip
-    rows = [[float(v) for v in line.split(",")] for line in lines if line.strip()]
-    curve = [(int(r[0]), r[1], r[2]) for r in rows if len(r) == 3 and r[0] <= model.num_timesteps]
+    curve_path = out / "learning_curve.csv"
+    lines = curve_path.read_text().splitlines() if curve_path.exists() else []
+    rows = []
+    for number, line in enumerate(lines[1:], start=2):
+        try:
+            rows.append([float(v) for v in line.split(",")] if line.strip() else [])
+        except ValueError:
+            raise ValueError(f"{curve_path} line {number} is not a row of numbers ({line!r}): "
+                             "repair it, or use a new --out") from None  # fmt: skip
+    curve = [(int(r[0]), r[1], r[2]) for r in rows
+             if len(r) == 3 and np.isfinite(r[0]) and r[0] <= model.num_timesteps]  # fmt: skip
     return model, curve
 
 
@@ -147,9 +172,9 @@ def make_env(env_id: str, **env_kwargs: Any) -> gym.Env:
         return gym.make(env_id, **env_kwargs)
     except TypeError:
         raise ValueError(
-            f"{env_id} does not take the task's options ({', '.join(env_kwargs)}): train and "
-            "evaluate fly the quadrotor envs and their surrogates (PlanarQuad-v0, "
-            "Quad6DOF-v0, PlanarQuadSINDy-v0, ...)"
+            f"{env_id} does not take the task's options ({', '.join(env_kwargs)}): the tasks "
+            "fly the quadrotor envs and their surrogates (PlanarQuad-v0, Quad6DOF-v0, "
+            "PlanarQuadSINDy-v0, ...)"
         ) from None
 
 
@@ -220,6 +245,7 @@ def train(
     from agents.policies import SB3Policy
 
     _positive(steps=steps, eval_every=eval_every, eval_episodes=eval_episodes)
+    check_seed(seed)  # before the output folder is made
     # SB3's small networks run fastest on one thread (SAC, 1500 steps on 2 cores: 16.2 s with
     # torch's default threads, 8.7 s on one; the same curve); TORCH_NUM_THREADS overrides
     torch.set_num_threads(int(os.environ.get("TORCH_NUM_THREADS", "1")))

@@ -23,6 +23,11 @@ def _umask() -> int:
     return mask
 
 
+def file_mode() -> int:
+    """The permissions an ordinary ``open()`` gives a new file: 0666 less the process umask."""
+    return 0o666 & ~_umask()
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Writes data to a temporary file beside ``path`` and renames it into place.
 
@@ -47,7 +52,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     except OSError as exc:
         raise ValueError(f"cannot write {given}: {exc.strerror}") from None
     try:
-        os.fchmod(fd, 0o666 & ~_umask())
+        os.fchmod(fd, file_mode())
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
             handle.flush()

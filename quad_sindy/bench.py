@@ -10,6 +10,12 @@ import gymnasium as gym
 import numpy as np
 
 
+def _check_seconds(min_seconds: float) -> None:
+    """Raises ValueError unless the timing is finite and positive (NaN never ends one)."""
+    if not (np.isfinite(min_seconds) and min_seconds > 0):
+        raise ValueError(f"the time per measurement must be positive and finite, got {min_seconds}")
+
+
 def _rate(step: Callable[[], object], min_seconds: float) -> float:
     """Calls ``step`` repeatedly for at least min_seconds; returns calls per second.
 
@@ -120,6 +126,7 @@ def _best_rates(
 
 def single_env_rate(env_id: str, min_seconds: float = 2.0, **kwargs: object) -> float:
     """Steps per second of ``gym.make(env_id)`` under a fixed in-bounds action."""
+    _check_seconds(min_seconds)
     return _best_rates([_single_stepper(env_id, **kwargs)], min_seconds, 1)[0]
 
 
@@ -127,6 +134,7 @@ def vector_env_rate(
     env_id: str, num_envs: int = 1024, min_seconds: float = 2.0, **kwargs: object
 ) -> float:
     """Env-steps per second of ``gym.make_vec(env_id, num_envs)`` (native vector env)."""
+    _check_seconds(min_seconds)
     return _best_rates([_vector_stepper(env_id, num_envs, **kwargs)], min_seconds, 1)[0]
 
 
@@ -165,6 +173,7 @@ def bench_envs(
         Rows ``env, mode, effects, steps_per_s, ratio`` (ratio to Pendulum-v1's single rate);
         a peer that cannot run gives a row with only ``note``.
     """
+    _check_seconds(min_seconds)
     labels = [("Pendulum-v1", "single", "-")]
     steppers = [_single_stepper("Pendulum-v1")]
     for env_id in env_ids:
@@ -202,6 +211,7 @@ def bench_surrogate(min_seconds: float = 2.0) -> list[dict]:
     per RK4 stage). The last row is the time ``gym.make`` of the surrogate took first in
     this process (numba compiles a new model once per machine, then loads its cache).
     """
+    _check_seconds(min_seconds)
     import pysindy as ps
 
     from identification.compiled import compiled_rhs

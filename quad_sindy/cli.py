@@ -293,6 +293,8 @@ def bench_envs_cmd(
     import quad_envs
     from quad_sindy.bench import bench_envs
 
+    if not (math.isfinite(seconds) and seconds > 0):
+        _fail(f"--seconds must be a positive finite number, got {seconds:g}")
     rows = bench_envs(quad_envs.ENV_IDS, num_envs, seconds)
     typer.echo(f"{'env':<16} {'mode':<14} {'effects':<8} {'steps/s':>12} {'x Pendulum-v1':>14}")
     for row in rows:
@@ -842,10 +844,13 @@ def bench_surrogate_cmd(
     """Steps/s of a SINDy surrogate (compiled) against the truth and pysindy's predict."""
     from quad_sindy.bench import bench_surrogate
 
+    if not (math.isfinite(seconds) and seconds > 0):
+        _fail(f"--seconds must be a positive finite number, got {seconds:g}")
     typer.echo(f"{'env':<36} {'steps/s':>10} {'ratio':>8}")
     for row in bench_surrogate(seconds):
         rate = "" if row["steps_per_s"] != row["steps_per_s"] else f"{row['steps_per_s']:,.0f}"
-        typer.echo(f"{row['env']:<36} {rate:>10} {row['ratio']:>8.2f}")
+        ratio = "" if row["ratio"] != row["ratio"] else f"{row['ratio']:.2f}"
+        typer.echo(f"{row['env']:<36} {rate:>10} {ratio:>8}")
 
 
 def _check_model_option(env: str, model: Path | None) -> None:
@@ -955,10 +960,14 @@ def train_cmd(
 
     A surrogate flies with the env's vehicle limits (``--vehicle``, ``--param``).
     """
-    from agents.train import train
+    from agents.train import check_seed, train
 
     if steps < 1 or eval_every < 1:
         _fail(f"--steps and --eval-every must be positive, got {steps} and {eval_every}")
+    try:
+        check_seed(seed, "--seed")  # before the output folder is made
+    except ValueError as exc:
+        _fail(str(exc))
     _check_model_option(env, model)
     _writable_folder(out)
     kwargs = {**({"model": str(model)} if model else {}), **_vehicle_options(vehicle, param)}
@@ -1086,25 +1095,33 @@ def mbrl(
 
     from agents.mbrl import MBRLConfig, run_experiment
     from agents.parallel import ray_available
+    from agents.tasks import task_kwargs
+    from agents.train import make_env
     from identification import SURROGATE_IDS
 
+    # every option is checked before config.json is written: a failed start left a folder
+    # that refused the next, valid run as "another configuration"
     if env in (*SURROGATE_IDS, "CrazyflieSINDy-v0"):
         _fail(f"--env is the ground truth the loop learns from (PlanarQuad-v0, ...), not {env}")
-    if disagreement < 0:
-        _fail(
-            f"--disagreement must be >= 0 (0: never end an imagined episode), got {disagreement:g}"
-        )
+    if not (math.isfinite(disagreement) and disagreement >= 0):
+        _fail(f"--disagreement must be a finite number >= 0 (0: never end an imagined "
+              f"episode), got {disagreement:g}")  # fmt: skip
+    if workers < 1:
+        _fail(f"--workers must be a positive integer, got {workers}")
     if (workers > 1 or address) and not ray_available():
         _fail("parallel runs need Ray: pip install 'quad-sindy[ray]' (or --workers 1)")
     env_options: dict[str, object] = _vehicle_options(vehicle, param)
     if effects:
         names = [e.strip() for e in effects.split(",") if e.strip()]
         env_options["effects"] = "all" if names == ["all"] else names
-    if env_options:
-        try:
-            gym.make(env, **env_options).close()
-        except (ValueError, gym.error.Error) as exc:
-            _fail(str(exc))
+    try:
+        gym.spec(env)
+    except gym.error.Error as exc:
+        _fail(f"--env {env}: {str(exc).removeprefix('Error: ')}")
+    try:  # a quadrotor env taking the task's and the vehicle's options
+        make_env(env, **task_kwargs(task, **env_options)).close()
+    except (ValueError, gym.error.Error) as exc:
+        _fail(str(exc))
     config = MBRLConfig(
         env_id=env, task=task, algo=algo.value, iterations=iterations,
         initial_real_steps=initial_real_steps, real_steps_per_iteration=real_steps,

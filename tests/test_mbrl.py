@@ -183,3 +183,67 @@ def test_the_loop_can_identify_from_what_a_real_log_holds(tmp_path):
     assert len(result["curve"]) == TINY.iterations
     with pytest.raises(ValueError, match="unknown data 'sensors'"):
         MBRLConfig(data="sensors")
+
+
+@pytest.mark.parametrize(
+    "args,fragments",
+    [
+        (["--env", "CartPole-v1"], ["CartPole-v1 does not take the task's options"]),
+        (["--env", "Foo-v0"], ["--env Foo-v0", "doesn't exist"]),
+        (["--workers", "0"], ["--workers must be a positive integer, got 0"]),
+        (["--disagreement", "nan"], ["--disagreement must be a finite number", "nan"]),
+        (["--disagreement", "inf"], ["--disagreement must be a finite number", "inf"]),
+    ],
+)
+def test_cli_refuses_bad_options_before_writing_its_configuration(
+    monkeypatch, capsys, tmp_path, args, fragments
+):
+    """A failed start left config.json (a traceback for CartPole-v1), and the folder then
+    refused the next, valid run as "another configuration"; NaN was stored as "never"."""
+    from tests.test_cli import assert_one_line_error, run_cli
+
+    out = tmp_path / "m"
+    code, _, err = run_cli(monkeypatch, capsys, "mbrl", "--out", str(out), "--seeds", "1", *args)
+    assert_one_line_error(code, err, *fragments)
+    assert not out.exists()
+
+
+def test_experiment_checks_workers_and_disagreement_before_writing(tmp_path):
+    with pytest.raises(ValueError, match="workers must be a positive integer"):
+        run_experiment(TINY, tmp_path / "w", seeds=1, workers=0)
+    assert not (tmp_path / "w").exists()
+    for value in (float("nan"), float("inf"), -1.0):
+        with pytest.raises(ValueError, match="disagreement must be a finite number"):
+            dataclasses.replace(TINY, disagreement=value)
+
+
+RECORD = "sindy_seed0.json is not a finished run record"
+CONFIG = "config.json is not an experiment configuration"
+
+
+@pytest.mark.parametrize(
+    "name,text,problem",
+    [
+        ("runs/sindy_seed0.json", "{}", rf"{RECORD} \(no 'curve'\)"),
+        ("runs/sindy_seed0.json", "", rf"{RECORD} \(it is empty\)"),
+        ("runs/sindy_seed0.json", "[1, 2]", rf"{RECORD} \(no 'curve'\)"),
+        ("runs/model_free_seed0.json", '{"curve": [{"real_steps": 1}]}', "without the numbers"),
+        ("config.json", "[1, 2]", rf"{CONFIG} \(not a JSON object\)"),
+        ("config.json", '{"env_id": ', rf"{CONFIG} \(not JSON"),
+    ],
+)
+def test_a_malformed_resume_file_is_named_with_what_to_do(tmp_path, name, text, problem):
+    """Such files gave KeyError/TypeError tracebacks or a bare JSON decoder message."""
+    from quad_envs.fileio import write_json
+
+    settings = {**dataclasses.asdict(TINY), "seeds": [0]}
+    write_json(tmp_path / "config.json", settings)
+    curve = [{"real_steps": 100, "return_mean": 1.0, "return_std": 0.0}]
+    for method in ("sindy", "model_free"):
+        write_json(tmp_path / "runs" / f"{method}_seed0.json", {"seed": 0, "curve": curve})
+    (tmp_path / name).write_text(text)
+    fix = "use a new --out" if name == "config.json" else "remove it to rerun that job"
+    with pytest.raises(ValueError, match=problem) as error:
+        run_experiment(TINY, tmp_path, seeds=1, echo=lambda s: None)
+    assert str(error.value).endswith(fix) and "\n" not in str(error.value)
+    assert (tmp_path / name).read_text() == text  # nothing was overwritten

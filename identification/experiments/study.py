@@ -193,11 +193,41 @@ def _cases(study: str) -> list[tuple[str, float, Callable[[], dict]]]:
     return cases
 
 
-def _read_done(path: Path) -> list[dict[str, str]]:
+def _read_done(path: Path, study: str) -> list[dict[str, str]]:
+    """The rows of an earlier run of ``study`` in ``path`` (none if there is no file).
+
+    Raises:
+        ValueError: ``path`` is not a table of this study (a user's file, never overwritten),
+            or a row of it is not (naming the line).
+    """
     if not path.exists():
         return []
-    with path.open() as handle:
-        return list(csv.DictReader(handle))
+    with path.open(newline="") as handle:
+        reader = csv.DictReader(handle)
+        header = reader.fieldnames or []
+        if tuple(header) != FIELDS:
+            raise ValueError(
+                f"{path} is not a table of the {study} study (its header is not "
+                f"{','.join(FIELDS)}): move it away, or use another --out"
+            )
+        rows = list(reader)
+    for number, row in enumerate(rows, start=2):
+        try:
+            if None in row or None in row.values():
+                raise ValueError(f"not {len(FIELDS)} cells")
+            if row["study"] != study:
+                raise ValueError(f"study {row['study']!r}, not {study!r}")
+            float(row["x"])
+            float(row["max_rel_error"])
+            for name in ("missed", "spurious"):
+                if row[name] != "":
+                    int(row[name])
+        except ValueError as exc:
+            raise ValueError(
+                f"{path} line {number} is not a row of the {study} study ({exc}): repair or "
+                "remove that line, and the study reruns that case"
+            ) from None
+    return rows
 
 
 def run_study(study: str, out: str | Path, progress: bool = True) -> Path:
@@ -209,7 +239,7 @@ def run_study(study: str, out: str | Path, progress: bool = True) -> Path:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{study}.csv"
-    rows = _read_done(path)
+    rows = _read_done(path, study)
     done = {(r["method"], float(r["x"])) for r in rows}
     cases = _cases(study)
     todo = [c for c in cases if (c[0], float(c[1])) not in done]
