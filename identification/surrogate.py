@@ -10,8 +10,9 @@ the rollout went past it (in widths of the range; 0 inside): the model was teste
 
 from __future__ import annotations
 
+import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +46,7 @@ def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: b
     if model is None:
         raise ValueError("a surrogate env needs model= (a model object or a model JSON path)")
     if not isinstance(model, IdentifiedModel):
-        model = load_model(model)
+        model = load_model(_model_path(model, "an IdentifiedModel"))
     vehicle = cls.vehicle
     ours = (model.state_names, model.input_names)
     theirs = (vehicle.state_names, vehicle.input_names)
@@ -54,6 +55,13 @@ def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: b
     elif ours != theirs:
         raise ValueError(_mismatch(model, base_id, theirs))
     return model, cls
+
+
+def _model_path(model: Any, kind: str) -> str | os.PathLike:
+    """``model`` where it names a file; a ValueError naming ``model=`` for anything else."""
+    if not isinstance(model, str | os.PathLike):
+        raise ValueError(f"model= takes {kind} or the path of its JSON file, got {model!r}")
+    return model
 
 
 def _in_order(model: IdentifiedModel, states: tuple, inputs: tuple) -> IdentifiedModel:
@@ -215,13 +223,20 @@ def _rotorcraft_env(model: Any, vector: bool, kwargs: dict[str, Any]) -> tuple[A
     """The motor-speed env class and its options for a rotorcraft model (or its JSON path)."""
     from identification.rotorcraft import RotorcraftModel, load_rotorcraft
     from quad_envs.envs.crazyflie import CrazyflieMotorsEnv, CrazyflieMotorsVectorEnv
-    from quad_envs.vehicles.crazyflie_motors import CRAZYFLIE_MOTOR_SPEEDS
+    from quad_envs.params import with_changes
+    from quad_envs.vehicles.crazyflie_motors import CRAZYFLIE_MOTOR_SPEEDS, MotorSpeedParams
 
     if model is None:
         raise ValueError("a rotorcraft surrogate needs model= (a RotorcraftModel or its JSON path)")
     if not isinstance(model, RotorcraftModel):
-        model = load_rotorcraft(model)
+        model = load_rotorcraft(_model_path(model, "a RotorcraftModel"))
     params = kwargs.pop("params", None) or CRAZYFLIE_MOTOR_SPEEDS
+    if isinstance(params, Mapping):  # changes to the nominal vehicle, as the env takes them
+        params = with_changes(CRAZYFLIE_MOTOR_SPEEDS, params)
+    if not isinstance(params, MotorSpeedParams):
+        raise ValueError(
+            f"params must be a mapping of changes or a MotorSpeedParams, got {params!r}"
+        )
     # Reset at the speeds the identified model hovers at (its own thrust and trim).
     params = params.replace(hover_speeds=tuple(float(s) for s in model.hover_speeds()))
     cls = CrazyflieMotorsVectorEnv if vector else CrazyflieMotorsEnv

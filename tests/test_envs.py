@@ -323,3 +323,38 @@ def test_vector_reset_info_is_the_single_envs_member_by_member(env_id):
     *_, infos = venv.step(np.tile(action, (3, 1)))
     assert set(info) <= set(infos)  # out_of_bounds was missing from the vector env's step
     np.testing.assert_allclose(infos["state"][0], info["state"])
+
+
+@pytest.mark.parametrize(
+    "kwargs,problem",
+    [
+        ({"normalize_actions": "no"}, "normalize_actions must be True or False, got 'no'"),
+        ({"dt": "abc"}, "dt must be a number, got 'abc'"),
+        ({"substeps": "2"}, "substeps must be a number"),
+        ({"params": [1, 2]}, "params must be a mapping of changes"),
+        ({"effects": {"drag": "abc"}}, "effects.drag must be True or False"),
+        ({"effects": {"drag": True, "gust_std": "abc"}}, "effects.gust_std must be a number"),
+    ],
+)
+@pytest.mark.parametrize("vector", [False, True])
+def test_options_of_the_wrong_type_are_refused_by_name(kwargs, problem, vector):
+    """A truthy string switched normalisation on; other types failed deep inside numpy."""
+    with pytest.raises(ValueError, match=problem.replace("(", r"\(")):
+        if vector:
+            gym.make_vec("PlanarQuad-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                         **kwargs)  # fmt: skip
+        else:
+            gym.make("PlanarQuad-v0", **kwargs)
+
+
+def test_reset_options_and_params_of_another_kind_are_refused_by_name():
+    from quad_envs.params import PAPER_6DOF
+
+    with pytest.raises(ValueError, match="reset options must be a dict"):
+        gym.make("PlanarQuad-v0").reset(options=5)
+    with pytest.raises(ValueError, match="reset options must be a dict"):
+        gym.make_vec("PlanarQuad-v0", num_envs=2).reset(options=[("state", 0)])
+    with pytest.raises(ValueError, match="PlanarQuadParams, got Quad6DOFParams"):
+        gym.make("PlanarQuad-v0", params=PAPER_6DOF)
+    env = gym.make("CrazyflieMotors-v0", params={"mass": 0.05})  # changes, as the others take
+    assert env.unwrapped.params.mass == 0.05

@@ -316,3 +316,35 @@ def test_training_resumes_from_its_checkpoint_and_never_starts_over(tmp_path):
     assert steps == sorted(set(steps)) and steps[-1] == 2048
     with pytest.raises(ValueError, match=r"another configuration \(seed: 0 there, 1 here\)"):
         train("PlanarQuad-v0", "ppo", 2048, out, seed=1, **options)
+
+
+def test_a_surrogate_model_of_another_type_is_refused_by_name():
+    for env_id, kind in (("PlanarQuadSINDy-v0", "IdentifiedModel"),
+                         ("CrazyflieSINDy-v0", "RotorcraftModel")):  # fmt: skip
+        with pytest.raises(ValueError, match=f"model= takes an? {kind} or the path"):
+            gym.make(env_id, model=5)
+
+
+def test_train_checks_its_seed_first_follows_the_umask_and_names_a_corrupt_curve(tmp_path):
+    """``--seed -1`` left an empty folder, model.zip was 0644 under umask 077, and a corrupt
+    learning curve gave "could not convert string to float" with no file named."""
+    import os
+
+    from agents.train import train
+
+    with pytest.raises(ValueError, match=r"seed must be an integer from 0 to 2\*\*32 - 1"):
+        train("PlanarQuad-v0", "ppo", 10, tmp_path / "bad", seed=-1)
+    assert not (tmp_path / "bad").exists()
+    out = tmp_path / "run"
+    options = {"eval_every": 1024, "eval_episodes": 1, "progress": False}
+    old = os.umask(0o077)
+    try:
+        train("PlanarQuad-v0", "ppo", 1024, out, **options)
+    finally:
+        os.umask(old)
+    assert {p.name: p.stat().st_mode & 0o777 for p in out.iterdir()} == {
+        "model.zip": 0o600, "run.json": 0o600, "learning_curve.csv": 0o600,
+    }  # fmt: skip
+    (out / "learning_curve.csv").write_text("steps,return_mean,return_std\n1024,abc,1\n")
+    with pytest.raises(ValueError, match=r"run/learning_curve.csv line 2 is not a row of numbers"):
+        train("PlanarQuad-v0", "ppo", 2048, out, **options)

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, is_dataclass
+from numbers import Real
 from typing import Any
 
 import gymnasium as gym
@@ -79,6 +80,14 @@ class EnvConfig:
     action_mode: str = "collective"
 
     def __post_init__(self) -> None:
+        if not isinstance(self.normalize_actions, bool | np.bool_):  # "no" is truthy
+            raise ValueError(
+                f"normalize_actions must be True or False, got {self.normalize_actions!r}"
+            )
+        numbers = ("dt", "duration", "substeps", "init_state_scale", "obs_noise_std",
+                   "param_randomization")  # fmt: skip
+        for name in numbers:
+            _check_real(name, getattr(self, name))
         for name in ("dt", "duration"):
             value = getattr(self, name)
             if not np.isfinite(value) or value <= 0:
@@ -109,6 +118,36 @@ class EnvConfig:
         if unknown:
             raise ValueError(f"unknown env option(s) {unknown}; valid options: {valid}")
         return cls(**options)
+
+
+def _check_real(name: str, value: Any) -> None:
+    """Raises ValueError naming ``name`` unless ``value`` is a real number (not text, a bool)."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, Real):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+
+
+def _effects(spec: Any, ndim: int, n_rotors: int) -> physics.Effects:
+    """:meth:`physics.Effects.from_spec` with each setting's type checked, naming the setting.
+
+    A switch given as text (``{"drag": "no"}``) would be truthy, and a number given as text
+    ended deep inside the kernels' packing.
+    """
+    if isinstance(spec, Mapping):
+        defaults = physics.Effects()
+        for name, value in spec.items():
+            default = getattr(defaults, str(name), None)  # unknown names: from_spec names them
+            if isinstance(default, bool) and not isinstance(value, bool | np.bool_):
+                raise ValueError(f"effects.{name} must be True or False, got {value!r}")
+            if isinstance(default, int | float) and not isinstance(default, bool):
+                _check_real(f"effects.{name}", value)
+        spec = dict(spec)
+    effects = physics.Effects.from_spec(spec, ndim, n_rotors)
+    for name in ("rotor_dynamics", "observe_rotors", "drag"):  # an Effects made by hand
+        if not isinstance(getattr(effects, name), bool | np.bool_):
+            raise ValueError(
+                f"effects.{name} must be True or False, got {getattr(effects, name)!r}"
+            )
+    return effects
 
 
 _RESET_OPTIONS = ("trajectory", "state")
@@ -159,12 +198,18 @@ class _EnvCore:
         if params is None or isinstance(params, Mapping):
             preset = get_preset(config.vehicle, self.vehicle.name)
             params = with_changes(preset, params) if params else preset
+        elif not isinstance(params, type(self.vehicle.params)):
+            raise ValueError(
+                f"params must be a mapping of changes ({{'mass': 0.6}}) or a "
+                f"{type(self.vehicle.params).__name__}, got "
+                f"{type(params).__name__ if is_dataclass(params) else repr(params)}"
+            )
         check_can_hover(params)
         self.vehicle = self.vehicle.with_params(params)
         self.params = params
         veh = self.vehicle
         self._n, self._k, self._m = veh.n_states, veh.n_rotors, veh.n_inputs
-        self.effects = physics.Effects.from_spec(config.effects, veh.ndim, self._k)
+        self.effects = _effects(config.effects, veh.ndim, self._k)
         effects = self.effects
         if rhs is not None and effects.physical:
             raise ValueError(
@@ -292,6 +337,10 @@ class _EnvCore:
 
     def _check_options(self, options: dict[str, Any] | None) -> dict[str, Any]:
         """Validates reset options; a ``trajectory`` applies to the episode(s) it starts."""
+        if options is not None and not isinstance(options, Mapping):
+            raise ValueError(
+                f"reset options must be a dict (keys {list(_RESET_OPTIONS)}), got {options!r}"
+            )
         options = dict(options or {})
         unknown = set(options) - set(_RESET_OPTIONS)
         if unknown:

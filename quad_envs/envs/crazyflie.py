@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Mapping
 
 from quad_envs.envs.base import EnvConfig, QuadrotorEnv, QuadrotorVectorEnv
 from quad_envs.integrators import Rhs
+from quad_envs.params import with_changes
 from quad_envs.vehicles.crazyflie_motors import (
     CRAZYFLIE_MOTOR_SPEEDS,
     CRAZYFLIE_MOTORS,
@@ -23,14 +25,17 @@ class _MotorSpeedCore:
                 "this vehicle is commanded in motor speeds: action_mode must be "
                 "'motor_speeds' (or 'collective', the same)"
             )
-        if config.params is None and config.vehicle not in ("paper", "crazyflie"):
-            raise ValueError(f"this env flies the Crazyflie only, got vehicle={config.vehicle!r}")
+        params = config.params
+        if params is None or isinstance(params, Mapping):  # changes to the nominal vehicle
+            if config.vehicle not in ("paper", "crazyflie"):
+                raise ValueError(
+                    f"this env flies the Crazyflie only, got vehicle={config.vehicle!r}"
+                )
+            params = (
+                with_changes(CRAZYFLIE_MOTOR_SPEEDS, params) if params else CRAZYFLIE_MOTOR_SPEEDS
+            )
         # The vehicle's input is the motor speeds: the env's collective path hands them over.
-        config = dataclasses.replace(
-            config,
-            action_mode="collective",
-            params=CRAZYFLIE_MOTOR_SPEEDS if config.params is None else config.params,
-        )
+        config = dataclasses.replace(config, action_mode="collective", params=params)
         super()._configure(config, rhs)  # type: ignore[misc]
         if self._rotor_state:  # type: ignore[attr-defined]
             raise ValueError("the motor speeds are already states: rotor_dynamics does not apply")
