@@ -81,6 +81,9 @@ def saved_algo(path: str | Path) -> str:
         ValueError: The file is missing or not a stable-baselines3 PPO/SAC archive.
     """
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder; give the agent's .zip (a train --out folder "
+                         "holds model.zip)")  # fmt: skip
     if not path.is_file():
         raise ValueError(f"no such agent file: {path}")
     try:

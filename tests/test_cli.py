@@ -59,6 +59,7 @@ def ppo_zip(tmp_path_factory):
         (["train", "--out", "{tmp}/t", "--steps", "-5"], ["must be positive"]),
         (["evaluate", "--agent", "{file}"], ["not a saved stable-baselines3 agent"]),
         (["evaluate", "--agent", "{tmp}/missing.zip"], ["no such agent file"]),
+        (["evaluate", "--agent", "{tmp}"], ["is a folder; give the agent's .zip"]),
         (["compare", "--model", "{tmp}", "--out", "{tmp}/c"], ["is not a file"]),
         (["compare", "--model", "{binary}", "--out", "{tmp}/c"], ["not text"]),
         (["identify", "{binary}", "--out", "{tmp}/m.json"], ["is not a text CSV file"]),
