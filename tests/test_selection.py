@@ -123,8 +123,9 @@ def test_clean_six_dof_flights_near_the_float_limit_are_fitted_and_an_exact_rela
     """Short clean 6-DOF flights at fine steps bring the 519-term library's normalised
     singular values to a ratio under 1e-12: a fixed ratio refused them as "exactly collinear"
     (a held-out trial, 5 of 6 data sets at dt = 0.005), though they give the exact model. The
-    bar is the columns' round-off; a yaw held still (sin(psi) = sin(0.3) 1) is still refused."""
-    from identification.experiments.synthetic import OTHER_6DOF, quad6dof_flights
+    bar is the columns' round-off; a yaw held still (sin(psi) = sin(0.3) 1) is still refused,
+    and shorter flights, refused by a bar ten times higher, give the exact model."""
+    from identification.experiments.synthetic import OTHER_6DOF, quad6dof_flights, truth_quad6dof
     from identification.fit import Gram, check_identifiable, grams
     from identification.libraries import quad6dof_library
 
@@ -141,6 +142,15 @@ def test_clean_six_dof_flights_near_the_float_limit_are_fitted_and_an_exact_rela
         still.append(Trajectory(tr.t, x, tr.u, tr.state_names, tr.input_names))
     with pytest.raises(ValueError, match=r"'sin\(psi\)', '1'\] are exactly collinear"):
         check_identifiable(Gram.stack(grams(still, names, "forward", 1)), names, still)
+    # four flights of 300 rows sit at 1.5e-13, under a bar of 100 eps sqrt(terms) (5e-13)
+    # that refused them, yet they determine the model: the exact 36 terms
+    short = quad6dof_flights(OTHER_6DOF, FlightSpec(flights=4, steps=300, dt=0.005))
+    gram = Gram.stack(grams(short, names, "forward", 1))
+    sing = np.linalg.svd(gram.r / gram.col_norms, compute_uv=False)
+    assert sing[-1] < 100 * np.finfo(float).eps * np.sqrt(len(names))
+    model, _ = select_model(short, "quad6dof", n_models=0, windows=(1,))
+    found = check_support(model, truth_quad6dof(OTHER_6DOF))
+    assert not found.missed and not found.spurious and found.max_rel_error < 1e-9
 
 
 def _regulated(
