@@ -51,6 +51,11 @@ def _shifted(trajs: list, rows: int) -> tuple[list, str]:
     return kept, (f"; {short} segment(s) too short for the shift left out" if short else "")
 
 
+def _names(text: str | None) -> list[str] | None:
+    """A comma-separated option as a list of names (None when not given)."""
+    return [c.strip() for c in text.split(",") if c.strip()] if text else None
+
+
 def _fail(message: str) -> None:
     typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
     raise typer.Exit(2)
@@ -430,9 +435,7 @@ def identify(
     from identification.selection import WINDOWS, select_model
     from identification.support import long_run_ratio
 
-    def split(text: str | None) -> list[str] | None:
-        return [c.strip() for c in text.split(",") if c.strip()] if text else None
-
+    split = _names
     noted: tuple = ()  # (data, library) once both are known: their notes precede a refusal
 
     lam_value = _number_option("--lambda", lam, float, low=0.0) if lam != "auto" else None
@@ -600,6 +603,10 @@ def score(
     model: Annotated[Path, typer.Argument(help="identified model JSON")],
     data: Annotated[list[Path], typer.Argument(help="held-out CSV, parquet or NPZ files")],
     seconds: Annotated[float, typer.Option(help="prediction horizon [s]")] = 1.0,
+    columns: Annotated[
+        str | None,
+        typer.Option(help="names of a CSV's columns in order (replaces its header, as identify)"),
+    ] = None,
     time: Annotated[
         str | None, typer.Option(help="time column (default: as the model was trained)")
     ] = None,
@@ -656,7 +663,7 @@ def score(
             if not isinstance(time, str) or not time:
                 _fail(f"{model}: time_column must be a column name, got {time!r}")
         trajs, cleaning = load_data(
-            data, states=loaded.state_names, inputs=loaded.input_names, time=time,
+            data, _names(columns), states=loaded.state_names, inputs=loaded.input_names, time=time,
             angles=angles, measured=loaded.meta.get("measured_inputs", ()),
             time_unit=SECONDS_PER[units["time"]], angle_unit=RADIANS_PER[units["angles"]],
         )  # fmt: skip
@@ -689,6 +696,8 @@ def score(
         result = held_out_errors(loaded, trajs, steps)
     except (ValueError, FileNotFoundError) as exc:
         text = str(exc).splitlines()[0] if str(exc) else repr(exc)
+        if "not in the data" in text and columns is None:
+            text += " (logs renamed at identify need the same --columns here)"
         _fail(text + (unit_hint if "steps" in text else ""))
     if cleaning.changed:
         typer.echo(f"data: {cleaning.summary()}")

@@ -345,3 +345,35 @@ def test_show_leaves_out_a_selection_record_a_user_edited(monkeypatch, capsys, t
     path.write_text(json.dumps(data))
     code, _, err = run_cli(monkeypatch, capsys, "show", str(path))
     assert_one_line_error(code, err, "meta must be a JSON object")
+
+
+def test_score_renames_columns_as_identify_did(monkeypatch, capsys, tmp_path):
+    """A model identified from logs renamed with ``--columns`` scores the same logs with the
+    same ``--columns`` (a trial: score had no such option), the same score as on logs that
+    carry the model's names; without it, one line that names the option."""
+    from identification.data import write_trajectory_csv
+    from identification.experiments.synthetic import planar_flights
+
+    flights = planar_flights()
+    named = [write_trajectory_csv(tmp_path / f"n{i}.csv", tr) for i, tr in enumerate(flights)]
+    own = []  # the same logs under a user's own header
+    for path in named:
+        lines = path.read_text().splitlines(keepends=True)
+        header = lines[0].strip().split(",")
+        other = {"y": "py", "z": "pz", "phi": "roll", "u1": "thrust", "u2": "moment"}
+        own.append(tmp_path / f"own_{path.name}")
+        own[-1].write_text(",".join(other.get(c, c) for c in header) + "\n" + "".join(lines[1:]))
+    columns = lines[0].strip()
+    model = tmp_path / "m.json"
+    code, _, err = run_cli(monkeypatch, capsys, "identify", *map(str, own[:2]), "--out",
+                           str(model), "--lambda", "1e-3", "--window", "1",
+                           "--columns", columns)  # fmt: skip
+    assert code in (0, None), err
+    code, _, err = run_cli(monkeypatch, capsys, "score", str(model), str(own[2]))
+    assert_one_line_error(code, err, "not in the data", "--columns")
+    scores = []
+    for path, extra in ((own[2], ["--columns", columns]), (named[2], [])):
+        code, out, err = run_cli(monkeypatch, capsys, "score", str(model), str(path), *extra)
+        assert code in (0, None), err
+        scores.append(next(line for line in out.splitlines() if line.startswith("score")))
+    assert scores[0] == scores[1]
