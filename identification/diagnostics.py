@@ -465,6 +465,7 @@ def data_warnings(trajs: Sequence[Trajectory], feature_names: Sequence[str] = ()
         if name in inside and peak > 2 * np.pi and name not in wrapped
     ]
     notes += _frozen(trajs)
+    notes += _clocks(trajs)
     notes += _unit_mismatch(trajs, inside)
     jumps = np.max([np.abs(np.diff(np.column_stack([t.x, t.u]), axis=0)).max(axis=0)
                     for t in trajs], axis=0)  # fmt: skip
@@ -582,6 +583,42 @@ def stamp_jitter(
         "read as each segment's regular clock (stamps with noise, such as message arrival "
         "times)"
     )
+
+
+CLOCK_TOLERANCE = 1e-6
+"""A variable off a straight line in time by at most this share of its range is a clock."""
+
+
+def _clocks(trajs: Sequence[Trajectory]) -> list[str]:
+    """Notes naming a variable that rises at one fixed rate in time in every log: a clock.
+
+    A log's second time stamp (a trial's epoch milliseconds beside ``t``) taken for a state
+    is fitted as ``stamp_ms' = 1000`` and its rounding fills the outlier notes, with no word
+    that it is a clock. A state that moves at a constant speed in one flight does not move
+    at the same rate in every flight, so the rate must agree across logs (or there is one).
+    """
+    names = [*trajs[0].state_names, *trajs[0].input_names]
+    rates = np.full((len(trajs), len(names)), np.nan)
+    for k, tr in enumerate(trajs):
+        if len(tr) < 3:
+            continue
+        values = np.column_stack([tr.x, tr.u])
+        t = tr.t - tr.t.mean()
+        slope = t @ (values - values.mean(axis=0)) / (t @ t)
+        off = values - values.mean(axis=0) - np.outer(t, slope)
+        span = np.ptp(values, axis=0)
+        line = (span > 0) & (np.abs(off).max(axis=0) <= CLOCK_TOLERANCE * span)
+        rates[k, line] = slope[line]
+    notes = []
+    for j, name in enumerate(names):
+        rate = rates[:, j]
+        if np.all(np.isfinite(rate)) and np.ptp(rate) <= CLOCK_TOLERANCE * abs(rate[0]):
+            notes.append(
+                f"{name} rises by {rate[0]:.6g} per second of the time column in every log: a "
+                "clock, not a variable of the dynamics (give it as the time column, --time "
+                f"{name}, or leave it out: --states, --inputs)"
+            )
+    return notes
 
 
 def _frozen(trajs: Sequence[Trajectory]) -> list[str]:

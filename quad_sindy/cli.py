@@ -479,6 +479,9 @@ def identify(
                 trajs, cleaning = load_data(*as_preset, angles=declared, measured=first.measured,
                                             time_unit=unit, angle_unit=turn)  # fmt: skip
                 first = trajs[0]
+        if states is None and preset is None:  # every other column: say which they are
+            typer.echo(f"states: {', '.join(first.state_names)} (the columns that are not the "
+                       "time or an input; --states chooses)")  # fmt: skip
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")
         if input_shift:

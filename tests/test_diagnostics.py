@@ -66,6 +66,24 @@ def test_a_frozen_sensor_file_is_named_and_a_radian_spin_is_not_called_degrees(o
     assert any("inside sin/cos" in n for n in data_warnings(segs, planar_library()))
 
 
+def test_a_second_clock_taken_for_a_state_is_named_and_a_cruise_is_not(other_clean):
+    """Epoch milliseconds beside ``t`` taken for a state (a trial's log: fitted as
+    ``stamp_ms' = 1000``, its rounding in the outlier notes, no word of a clock) are named
+    with their rate; a state moving at constant, different speeds in each log is not."""
+    from identification.diagnostics import data_warnings
+
+    names = [*PS, "stamp_ms"]
+    stamped = [Trajectory(t.t, np.column_stack([t.x, 1.7e12 + 1000.0 * (t.t + 3.0 * k)]), t.u,
+                          names, PI) for k, t in enumerate(other_clean)]  # fmt: skip
+    notes = [n for n in data_warnings(stamped) if "clock" in n]
+    assert len(notes) == 1 and notes[0].startswith("stamp_ms rises by 1000 per second"), notes
+    assert "--time stamp_ms" in notes[0]
+    assert not any("clock" in n for n in data_warnings(other_clean, planar_library()))
+    cruise = [Trajectory(t.t, np.column_stack([t.x, (0.5 + k) * t.t]), t.u, names, PI)
+              for k, t in enumerate(other_clean)]  # fmt: skip
+    assert not any("clock" in n for n in data_warnings(cruise))
+
+
 def test_stamp_noise_is_told_from_irregular_sampling_by_the_data():
     """Jittery stamps are either samples at irregular times (each row's own step is right)
     or a regular clock stamped with noise (a trial: +-1 ms on an exact 10 ms clock gave 324
