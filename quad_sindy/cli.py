@@ -56,6 +56,12 @@ def _names(text: str | None) -> list[str] | None:
     return [c.strip() for c in text.split(",") if c.strip()] if text else None
 
 
+def _states_taken(states: tuple[str, ...]) -> str:
+    """The line naming the columns taken for states when ``--states`` was not given."""
+    return (f"states: {', '.join(states)} (the columns that are not the time or an input; "
+            "--states chooses)")  # fmt: skip
+
+
 def _fail(message: str) -> None:
     typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
     raise typer.Exit(2)
@@ -386,8 +392,8 @@ def identify(
     library: Annotated[
         str | None,
         typer.Option(
-            help="planar | quad6dof | planar_drag | quad6dof_drag | FILE.toml | "
-            "'degree=2;angles=phi;extra=...'"
+            help="planar | quad6dof | planar_drag | quad6dof_drag | a vehicle | FILE.toml | "
+            "'degree=2;angles=phi;trig_degree=2;angle_products=true;extra=...'"
         ),
     ] = None,
     lam: Annotated[
@@ -467,6 +473,7 @@ def identify(
                                     time_unit=unit, angle_unit=turn)  # fmt: skip
         first = trajs[0]
         library_note = None
+        taken = first.state_names  # printed with the model: every other column is a state
         if preset is None and library is None and angles is None:
             preset = _matching_vehicle(first.state_names, first.input_names)
             if preset is not None:
@@ -479,9 +486,6 @@ def identify(
                 trajs, cleaning = load_data(*as_preset, angles=declared, measured=first.measured,
                                             time_unit=unit, angle_unit=turn)  # fmt: skip
                 first = trajs[0]
-        if states is None and preset is None:  # every other column: say which they are
-            typer.echo(f"states: {', '.join(first.state_names)} (the columns that are not the "
-                       "time or an input; --states chooses)")  # fmt: skip
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")
         if input_shift:
@@ -553,6 +557,8 @@ def identify(
                 best = report.best
                 if library_note:
                     typer.echo(library_note)
+                if states is None and preset is None:
+                    typer.echo(_states_taken(taken))
                 typer.echo(
                     f"selection: window {best.window}, lambda {best.lam:g}, {best.n_terms} "
                     f"terms (score {best.mean:.3g} +- {best.se:.2g}, holding the state "
@@ -574,6 +580,8 @@ def identify(
                 noted = ()
                 if library_note:
                     typer.echo(library_note)
+                if states is None and preset is None:
+                    typer.echo(_states_taken(taken))
                 notes = data_warnings(trajs, lib)  # select_model reports them itself
                 if method in ("rk4", "forward"):
                     names, xi = list(model.feature_names), model.coefficients

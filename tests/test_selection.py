@@ -311,7 +311,7 @@ def test_an_input_that_barely_moves_beyond_its_logging_step_is_refused_as_such()
 def test_cli_errors_are_one_line_and_nonzero(tmp_path):
     path = tmp_path / "short.csv"
     path.write_text("t,y,z,phi,y_dot,z_dot,phi_dot,u1,u2\n" + "\n".join(
-        f"{k * 0.01},{k},{k},0,0,0,0,1,0" for k in range(30)
+        f"{k * 0.01},{k % 7},{k % 5},0,0,0,0,1,0" for k in range(30)
     ))  # fmt: skip
     result = CliRunner().invoke(app, ["identify", str(path), "--out", str(tmp_path / "m.json")])
     assert result.exit_code == 2
