@@ -8,6 +8,8 @@ so the paper's exact pysindy library and our physics-informed ones are interchan
 from __future__ import annotations
 
 import itertools
+import math
+import re
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -153,20 +155,65 @@ def default_library(system: str) -> list[str]:
     raise ValueError(f"unknown system {system!r}; valid choices: {valid}")
 
 
+TRIG_FUNCTIONS = ("sin", "cos", "tan", "sec")
+"""Functions that make an angle's factors in a :class:`LibrarySpec` (``functions``)."""
+
+MAX_TERMS = 5000
+"""Largest library a :class:`LibrarySpec` builds (a fit of more columns takes hours)."""
+
+_FUNCTION_ENTRY = re.compile(r"^(sin|cos|tan|sec)(?:\(\s*([A-Za-z_]\w*)\s*\))?$")
+
+
+def _function_entry(entry: str) -> tuple[str, str]:
+    """``tan(theta)`` -> ("tan", "theta"); ``sin`` -> ("sin", "") (every angle)."""
+    match = _FUNCTION_ENTRY.match(entry.strip())
+    if not match:
+        raise ValueError(
+            f"functions entry {entry!r} is not one of {', '.join(TRIG_FUNCTIONS)} (every angle) "
+            "or one of them of one angle such as tan(theta) (frequencies sets the multiples)"
+        )
+    return match.group(1), match.group(2) or ""
+
+
 @dataclass(frozen=True)
 class LibrarySpec:
     """A library described by a few choices instead of a list of terms.
 
+    The library is: ``1`` and the polynomials of the non-angle variables up to ``degree``;
+    then each trig factor alone and times each monomial of degree 1 to ``trig_degree`` in
+    the multipliers; then ``extra`` and the ``drag`` terms. Duplicates are dropped, the
+    first kept. A trig factor is one angle's function (``sin(phi)``, ``cos(2 phi)``,
+    ``tan(theta)``) or, with ``angle_products``, a product of at most one such function
+    per angle (``cos(phi) sin(theta) cos(psi)``). The defaults give the libraries of
+    earlier versions, term for term.
+
     Attributes:
         degree: Largest total degree of the polynomials in the non-angle variables.
-        angles: Angle variables: they enter through sin(k a), cos(k a) only.
-        frequencies: Largest k of the Fourier terms.
-        trig_products: Multiply each Fourier term by every degree-1 monomial (states and inputs).
-        input_products: Multiply each Fourier term by each input only (when not trig_products).
+        angles: Angle variables: they enter through their functions (``functions``) only.
+        frequencies: Largest k of sin(k a) and cos(k a); tan and sec take k = 1 only
+            (tan(2 a) has poles inside the range of a tilt). 0: no trig factors.
+        trig_products: Multiply the trig factors by every non-angle variable (states and
+            inputs).
+        input_products: Multiply the trig factors by each input only (when not
+            trig_products).
         extra: Further named features in the grammar of :mod:`identification.features`.
         drag: Velocity variables that get drag terms (:func:`drag_terms`); empty for none.
         drag_angle: The body angle turning inertial drag velocities (planar ``phi``); empty
             for body-frame velocities.
+        trig_degree: Largest total degree of the monomials of the multipliers that multiply
+            each trig factor: 1 gives ``sin(phi) w1``, 2 also ``sin(phi) w1^2`` and
+            ``sin(phi) w1 w2`` (thrust k w^2 from motor speeds); 0 leaves the trig factors
+            bare.
+        functions: Which functions make the angle factors: ``sin``, ``cos``, ``tan``,
+            ``sec`` for every angle, or one of them of one angle, e.g.
+            ``("sin", "cos", "tan(theta)", "sec(theta)")`` (Z-Y-X Euler rates).
+        angle_products: Make the trig factors every product of at most one function per
+            angle (the empty product, i.e. the bare multipliers, is the polynomials' part),
+            as the rotation matrix of three Euler angles needs: with 3 angles and
+            ``sin, cos`` 26 factors instead of 6.
+        multipliers: The variables whose monomials multiply the trig factors (e.g. the
+            rates and the rotor inputs, leaving positions out); empty: the
+            trig_products / input_products rule. When given it replaces that rule.
     """
 
     degree: int = 2
@@ -177,33 +224,107 @@ class LibrarySpec:
     extra: tuple[str, ...] = field(default_factory=tuple)
     drag: tuple[str, ...] = field(default_factory=tuple)
     drag_angle: str = ""
+    trig_degree: int = 1
+    functions: tuple[str, ...] = ("sin", "cos")
+    angle_products: bool = False
+    multipliers: tuple[str, ...] = field(default_factory=tuple)
 
     def build(self, state_names: Sequence[str], input_names: Sequence[str]) -> list[str]:
-        """The feature names for these variables (duplicates removed, order kept)."""
+        """The feature names for these variables (duplicates removed, order kept).
+
+        Raises:
+            ValueError: An angle or multiplier is not a variable, a value is out of range,
+                or the library would hold more than :data:`MAX_TERMS` terms.
+        """
         variables = [*state_names, *input_names]
         unknown = [a for a in self.angles if a not in variables]
         if unknown:
             raise ValueError(f"angle(s) {unknown} are not variables of the data {variables}")
         if self.degree < 0 or self.frequencies < 0:
             raise ValueError("degree and frequencies must be >= 0")
+        if self.trig_degree < 0:
+            raise ValueError(f"trig_degree must be >= 0, got {self.trig_degree}")
         plain = [v for v in variables if v not in self.angles]
+        factors = self._angle_factors()
+        mult = self._multiplier_variables(plain, input_names, variables)
+        self._check_size(len(plain), factors, len(mult))
         names = ["1"]
         for d in range(1, self.degree + 1):
             names += [" ".join(c) for c in itertools.combinations_with_replacement(plain, d)]
-        fourier = [
-            f"{fn}({k} {a})" if k > 1 else f"{fn}({a})"
-            for a in self.angles
-            for k in range(1, self.frequencies + 1)
-            for fn in ("sin", "cos")
-        ]
-        mult = plain if self.trig_products else (input_names if self.input_products else [])
-        mult = [m for m in mult if m not in self.angles]
-        names += [f"{m} {f}" if m else f for f in fourier for m in ["", *mult]]
+        if self.angle_products:
+            choices = [["", *f] for f in factors.values()]
+            fourier = [" ".join(x for x in c if x) for c in itertools.product(*choices)][1:]
+        else:
+            fourier = [f for per_angle in factors.values() for f in per_angle]
+        monomials = [""]
+        for d in range(1, self.trig_degree + 1):
+            monomials += [" ".join(c) for c in itertools.combinations_with_replacement(mult, d)]
+        names += [f"{m} {f}" if m else f for f in fourier for m in monomials]
         names += list(self.extra)
         if self.drag:
             names += drag_terms(self.drag, self.drag_angle or None)
         canonical = [term_name(parse_term(n, variables)) for n in names]
         return list(dict.fromkeys(canonical))
+
+    def _angle_factors(self) -> dict[str, list[str]]:
+        """Each angle's factors: for k = 1..frequencies, each function that applies to it."""
+        if not self.functions:
+            raise ValueError(f"functions must name at least one of {', '.join(TRIG_FUNCTIONS)}")
+        entries = [_function_entry(e) for e in self.functions]
+        angles = list(dict.fromkeys(self.angles))
+        stray = [f"{fn}({a})" for fn, a in entries if a and a not in angles]
+        if stray:
+            declared = ",".join(angles) or "none"
+            raise ValueError(
+                f"functions entry {stray[0]} is of an angle not declared (angles: {declared})"
+            )
+        factors = {}
+        for a in angles:
+            fns = list(dict.fromkeys(fn for fn, only in entries if only in ("", a)))
+            factors[a] = [
+                f"{fn}({k} {a})" if k > 1 else f"{fn}({a})"
+                for k in range(1, self.frequencies + 1)
+                for fn in fns
+                if k == 1 or fn in ("sin", "cos")
+            ]
+        return factors
+
+    def _multiplier_variables(
+        self, plain: Sequence[str], input_names: Sequence[str], variables: Sequence[str]
+    ) -> list[str]:
+        """The variables whose monomials multiply the trig factors."""
+        if not self.multipliers:
+            mult = plain if self.trig_products else (input_names if self.input_products else [])
+            return [m for m in mult if m not in self.angles]
+        unknown = [m for m in self.multipliers if m not in variables]
+        if unknown:
+            raise ValueError(f"multipliers {unknown} are not variables of the data {variables}")
+        angles = [m for m in self.multipliers if m in self.angles]
+        if angles:
+            raise ValueError(
+                f"multipliers {angles} are angles: an angle enters only through its functions"
+            )
+        return list(dict.fromkeys(self.multipliers))
+
+    def _check_size(self, n_plain: int, factors: dict[str, list[str]], n_mult: int) -> None:
+        """Refuses, before building it, a library of more than :data:`MAX_TERMS` terms."""
+        counts = [len(f) for f in factors.values()]
+        n_trig = math.prod(c + 1 for c in counts) - 1 if self.angle_products else sum(counts)
+        n_poly = math.comb(n_plain + self.degree, self.degree)
+        n_mono = math.comb(n_mult + self.trig_degree, self.trig_degree)
+        n_drag = len(self.drag) * (6 if self.drag_angle else 2)
+        total = n_poly + n_trig * n_mono + len(self.extra) + n_drag
+        if total > MAX_TERMS:
+            raise ValueError(
+                f"library spec would build {total} terms, over the limit of {MAX_TERMS}: "
+                f"{n_poly} polynomials (degree={self.degree}, {n_plain} variables) and "
+                f"{n_trig} trig factors (angles={','.join(factors)}, "
+                f"functions={','.join(self.functions)}, frequencies={self.frequencies}, "
+                f"angle_products={str(self.angle_products).lower()}) times {n_mono} "
+                f"monomials (trig_degree={self.trig_degree}, {n_mult} multipliers); lower "
+                "degree, trig_degree or frequencies, name fewer multipliers or functions, or "
+                "set angle_products=false"
+            )
 
 
 def _parse_spec_text(text: str) -> dict[str, object]:
@@ -230,7 +351,7 @@ def _check_fields(fields: dict[str, object], source: str) -> dict[str, object]:
         raise ValueError(f"{source}: unknown key(s) {unknown}; valid: {sorted(allowed)}")
     out: dict[str, object] = {}
     for key, value in fields.items():
-        if key in ("degree", "frequencies"):
+        if key in ("degree", "frequencies", "trig_degree"):
             text = value.strip() if isinstance(value, str) else value
             if isinstance(text, str) and text.lstrip("+-").isdigit():
                 text = int(text)
@@ -239,13 +360,13 @@ def _check_fields(fields: dict[str, object], source: str) -> dict[str, object]:
                 hint = " (items are separated by ';')" if split else ""
                 raise ValueError(f"{source}: {key} must be an integer, got {value!r}{hint}")
             out[key] = text
-        elif key in ("trig_products", "input_products"):
+        elif key in ("trig_products", "input_products", "angle_products"):
             if isinstance(value, str) and value.strip().lower() in _TRUE + _FALSE:
                 value = value.strip().lower() in _TRUE
             if not isinstance(value, bool):
                 raise ValueError(f"{source}: {key} must be true or false, got {value!r}")
             out[key] = value
-        elif key in ("angles", "extra", "drag"):
+        elif key in ("angles", "extra", "drag", "functions", "multipliers"):
             items = value.split(",") if isinstance(value, str) else value
             if not isinstance(items, list | tuple) or not all(isinstance(v, str) for v in items):
                 raise ValueError(
@@ -253,6 +374,16 @@ def _check_fields(fields: dict[str, object], source: str) -> dict[str, object]:
                     f"string), got {value!r}"
                 )
             out[key] = tuple(v.strip() for v in items if v.strip())
+            if key == "functions":
+                if not out[key]:
+                    raise ValueError(
+                        f"{source}: functions must name at least one of {', '.join(TRIG_FUNCTIONS)}"
+                    )
+                for entry in out[key]:  # type: ignore[union-attr]
+                    try:
+                        _function_entry(entry)
+                    except ValueError as exc:
+                        raise ValueError(f"{source}: {exc}") from None
         else:  # drag_angle
             if not isinstance(value, str):
                 raise ValueError(f"{source}: {key} must be a variable name, got {value!r}")
@@ -269,17 +400,26 @@ def library_from_spec(
     """A library from a preset name, a spec string, a TOML file, a spec or a list of terms.
 
     Args:
-        spec: ``planar`` / ``quad6dof`` (presets); a path to a TOML file with a ``[library]``
-            table (keys of :class:`LibrarySpec`); a string such as
-            ``degree=2;angles=phi;extra=u1 sin(phi);drag=y_dot,z_dot;drag_angle=phi``; a
-            :class:`LibrarySpec`; a list of
-            feature names; or None (``degree=2`` with the declared ``angles``).
+        spec: A preset (:data:`PRESETS`) or a registered vehicle's name: its own library,
+            written for its variable names; a path to a TOML file with a ``[library]``
+            table (keys of :class:`LibrarySpec`); a string of ``key=value`` items separated
+            by ``;`` such as ``degree=2;angles=phi;extra=u1 sin(phi)``,
+            ``degree=2;angles=phi;trig_degree=2;multipliers=w1,w2`` (``sin(phi) w1^2``) or
+            ``degree=2;angles=phi,theta,psi;functions=sin,cos,tan(theta),sec(theta);``
+            ``angle_products=true;multipliers=p,q,r,f1,f2,f3,f4`` (6-DOF, Z-Y-X angles); a
+            :class:`LibrarySpec`; a list of feature names; or None (``degree=2`` with the
+            declared ``angles``).
         state_names: The data's states.
         input_names: The data's inputs.
         angles: Declared angle variables (used when the spec names none).
 
     Returns:
         Feature names.
+
+    Raises:
+        ValueError: In one line: a preset whose variables the data lack (naming both sets,
+            ``--columns`` and a spec in the data's names), a bad key or value, or a spec of
+            more than :data:`MAX_TERMS` terms.
     """
     variables = [*state_names, *input_names]
     if isinstance(spec, LibrarySpec):
@@ -287,10 +427,9 @@ def library_from_spec(
     if spec is None:
         return LibrarySpec(angles=tuple(angles)).build(state_names, input_names)
     if isinstance(spec, str):
-        if spec in PRESETS:
+        if _is_preset(spec):
             names = default_library(spec)
-            for name in names:
-                parse_term(name, variables)  # raises naming a variable the data lack
+            _check_preset_variables(spec, names, variables, angles)
             return names
         if spec.lower().endswith(".toml"):
             return LibrarySpec(**_read_toml(Path(spec), angles)).build(state_names, input_names)
@@ -301,9 +440,66 @@ def library_from_spec(
     return list(dict.fromkeys(names))
 
 
+def _is_preset(spec: str) -> bool:
+    """Whether a library text is a preset or a registered vehicle's name."""
+    from quad_envs.vehicles import VEHICLES
+
+    return spec in PRESETS or spec in VEHICLES
+
+
+def _check_preset_variables(
+    preset: str, names: Sequence[str], variables: Sequence[str], angles: Sequence[str]
+) -> None:
+    """Refuses, in one line, a preset whose variables the data lack, with the ways out."""
+    from quad_envs.vehicles import get_vehicle
+
+    used = {v for n in names for f in parse_term(n) for v in f.variables()}
+    missing = used - set(variables)
+    if not missing:
+        return
+    record = get_vehicle(preset.removesuffix("_drag"))
+    order = [*record.state_names, *record.input_names]
+    own = [v for v in order if v in used] + sorted(used - set(order))
+    lacked = [v for v in own if v in missing]
+    example = _preset_as_spec(names, record.angle_names, angles)
+    raise ValueError(
+        f"library {preset!r} is a preset written for the variables {', '.join(own)}; the "
+        f"data lack {', '.join(lacked)} (the data's: {', '.join(variables)}): rename the "
+        "data's columns to the preset's names with --columns, or write the library in the "
+        f'data\'s names, e.g. --library "{example}" (multipliers=... chooses what the trig '
+        "factors multiply)"
+    )
+
+
+def _preset_as_spec(
+    names: Sequence[str], preset_angles: Sequence[str], angles: Sequence[str]
+) -> str:
+    """A spec text with a preset's structure, in the declared angles' names if given."""
+    terms = [parse_term(n) for n in names]
+    trig = [[f for f in t if f.kind in TRIG_FUNCTIONS] for t in terms]
+    power = [sum(f.k for f in t if f.kind == "pow") for t in terms]
+    uses = {(f.kind, f.var) for fs in trig for f in fs}
+    preset_angles = [a for a in preset_angles if any(a == var for _, var in uses)]
+    same = len(angles) == len(preset_angles)
+    rename = dict(zip(preset_angles, angles, strict=True)) if same else {}
+    functions = [fn for fn in TRIG_FUNCTIONS if all((fn, a) in uses for a in preset_angles)]
+    functions += [f"{fn}({rename.get(a, a)})" for fn in TRIG_FUNCTIONS for a in preset_angles
+                  if fn not in functions and (fn, a) in uses]  # fmt: skip
+    degree = max((d for d, fs in zip(power, trig, strict=True) if not fs), default=0)
+    trig_degree = max((d for d, fs in zip(power, trig, strict=True) if fs), default=1)
+    items = [f"degree={degree}", f"angles={','.join(rename.get(a, a) for a in preset_angles)}"]
+    if functions != ["sin", "cos"]:
+        items.append(f"functions={','.join(functions)}")
+    if any(len({f.var for f in fs}) > 1 for fs in trig):
+        items.append("angle_products=true")
+    if trig_degree != 1:
+        items.append(f"trig_degree={trig_degree}")
+    return ";".join(items)
+
+
 def spec_angles(spec: str | None) -> tuple[str, ...]:
-    """The angles a spec string or TOML file declares (none for presets and None)."""
-    if not spec or spec in PRESETS:
+    """The angles a spec string or TOML file declares (none for presets, vehicles and None)."""
+    if not spec or _is_preset(spec):
         return ()
     toml = spec.lower().endswith(".toml")
     fields = _read_toml(Path(spec), ()) if toml else _parse_spec_text(spec)
