@@ -303,6 +303,72 @@ def exchange_and_add(
     return best if best[1] else None
 
 
+TWIN_KEEP = 0.5
+"""A twin is added beside a chosen term where its coefficient is at least this share of the
+term's and their joint contribution at least this share of the larger one's (a cancelling pair
+of |cos| > 0.999 keeps under 0.05)."""
+
+TWIN_FLOOR = 1e-5
+"""A residual under this share of its target's RMS is round-off or integrator error: no twin is
+added to explain it (a round-off "gain" passes any bar in its own variances)."""
+
+
+def add_reinforcing_twins(
+    a: np.ndarray,
+    b: np.ndarray,
+    support: Sequence[int],
+    usable: np.ndarray,
+    twin: np.ndarray,
+    bar: float,
+    total: float,
+    rows: float,
+) -> list[int]:
+    """Adds near twins of the support that the data need beside it, where the pair does not cancel.
+
+    The growth's best-subset search never puts two columns with |cos| > 0.999 together, as
+    such a pair fits noise with large opposite coefficients. Two true terms can be that
+    close: a trial's planar quad with per-rotor thrusts has `f1 sin(phi)` and `f2 sin(phi)`
+    at |cos| = 0.9993 (the rotors' thrusts differ little), and clean data kept
+    `f2, f1 sin(phi)` for the pair, 0.70 % off at 1 s. Here each twin of a chosen term is
+    added, best first, where it explains more than ``bar`` residual variances (the growth's
+    bar for a term more), its coefficient is at least :data:`TWIN_KEEP` of each twin's in
+    the support (a second term, not a small correction of the first: on 6-DOF data at
+    sigma = 1e-3 `tan(phi) ... w` entered at 2 % of its twin `sin(phi) ... w`, P = 0.5), and
+    their joint contribution keeps at least :data:`TWIN_KEEP` of the larger (the pair
+    reinforces rather than cancels). A term the addition makes redundant is left to the
+    pruning.
+
+    Returns:
+        The support, with the twins added.
+    """
+    support = list(support)
+    while True:
+        rss_now = least_squares(a, b, support)[0]
+        if rss_now <= TWIN_FLOOR**2 * total:
+            return support
+        best: tuple[float, list[int]] | None = None
+        for k in np.flatnonzero(twin[:, support].any(axis=1) & usable):
+            if k in support:
+                continue
+            trial = [*support, int(k)]
+            rss, coef = least_squares(a, b, trial)
+            sigma2 = (total - float(b @ b) + rss) / max(rows - len(trial), 1.0)
+            if rss_now - rss <= bar * sigma2:
+                continue
+            kept = all(
+                abs(coef[-1]) >= TWIN_KEEP * abs(coef[m])
+                and np.linalg.norm(coef[m] * a[:, j] + coef[-1] * a[:, k])
+                >= TWIN_KEEP * max(abs(coef[m]), abs(coef[-1]))
+                for m, j in enumerate(support)
+                if twin[j, k]
+            )
+            if kept and (best is None or rss < best[0]):
+                best = (rss, trial)
+        if best is None:
+            return support
+        support = best[1]
+
+
 def significance_bar(p: int) -> float:
     """Chi-square(1) at :data:`PRUNE_P` / p: the bar for the best of p candidate terms."""
     from scipy.stats import chi2
@@ -386,6 +452,8 @@ def grow_significant(
             if now[0] - explained_now > F_CRITICAL * sigma2:
                 support = list(now[1])
             break
+        support = add_reinforcing_twins(a, b, support, usable, twin, bar * scale, total,
+                                        float(gram.rows))  # fmt: skip
         if sorted(support) != sorted(start):
             xi[i] = refit_support(gram, i, support)
             added = [j for j in support if j not in start]

@@ -241,3 +241,55 @@ def test_a_grown_term_that_fits_the_noise_bias_is_dropped_and_a_real_one_kept(ot
     without[rate, u2] = 0.0
     xi, notes = drop_window_bias(path, without, gram, noisy, names, 4, PS, 1)
     assert xi[rate, u2] != 0 and notes == []
+
+
+def test_near_twin_rotor_terms_both_enter_and_a_cancelling_or_noise_twin_does_not(monkeypatch):
+    """Per-rotor thrusts make `f1 sin(phi)` and `f2 sin(phi)` near twins (|cos| > 0.998 here)
+    that both belong in `y_dot'`. A trial's clean log with a noisy battery voltage taken for
+    a state (its noise lifts the chosen threshold) kept one rotor with twice the coefficient:
+    the growth never puts two columns above |cos| 0.999 together. Reinforcing twins are added
+    where the data need them; a cancelling pair, a twin that only fits noise, or one that is a
+    small correction of its partner (2 %, yet significant) is not."""
+    import identification.support as support
+    from identification.experiments.synthetic import FlightSpec, planar_flights
+    from identification.selection import select_model
+
+    rng = np.random.default_rng(0)
+    data = []
+    for tr in planar_flights(OTHER_PLANAR, FlightSpec(flights=3, steps=600)):
+        u1, u2 = tr.u[:, 0], tr.u[:, 1] / OTHER_PLANAR.arm_length
+        volts = 12.6 - 0.05 * tr.t + 0.01 * rng.standard_normal(len(tr))
+        data.append(Trajectory(tr.t, np.column_stack([tr.x, volts]),
+                               np.column_stack([(u1 - u2) / 2, (u1 + u2) / 2]),
+                               [*tr.state_names, "volts"], ["f1", "f2"]))  # fmt: skip
+
+    def y_dot(model):
+        row = model.coefficients[model.state_names.index("y_dot")]
+        return {model.feature_names[j]: row[j] for j in np.flatnonzero(row)}
+
+    with pytest.warns(UserWarning):
+        model, _ = select_model(data, "degree=1;angles=phi", n_models=0)
+    rate = 1 / OTHER_PLANAR.mass
+    assert y_dot(model) == pytest.approx({"f1 sin(phi)": -rate, "f2 sin(phi)": -rate}, rel=1e-6)
+    monkeypatch.setattr(support, "add_reinforcing_twins", lambda a, b, s, *_: list(s))
+    with pytest.warns(UserWarning):
+        without, _ = select_model(data, "degree=1;angles=phi", n_models=0)
+    assert len(y_dot(without)) == 1  # one rotor for two: what the twins' step undoes
+    monkeypatch.undo()
+
+    n = 4000
+    s = rng.standard_normal(n)
+    cols = np.column_stack([s, s + 0.03 * rng.standard_normal(n), rng.standard_normal(n)])
+    a = cols / np.linalg.norm(cols, axis=0)
+    twin = np.abs(a.T @ a) > 0.999
+    np.fill_diagonal(twin, False)
+    assert twin[0, 1]
+    usable = np.ones(3, dtype=bool)
+    noise = 0.01 * rng.standard_normal(n)
+    bar = support.significance_bar(3)
+    for b, added in ((a[:, 0] + a[:, 1] + noise, [0, 1]),  # reinforcing and needed
+                     (40 * (a[:, 0] - a[:, 1]) + noise, [0]),  # needed but cancelling
+                     (a[:, 0] + noise, [0]),  # noise only
+                     (a[:, 0] + 0.02 * a[:, 1] + 1e-4 * noise, [0])):  # small  # fmt: skip
+        total = float(b @ b)
+        assert support.add_reinforcing_twins(a, b, [0], usable, twin, bar, total, n) == added
