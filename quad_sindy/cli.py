@@ -441,7 +441,6 @@ def identify(
     from identification.selection import WINDOWS, select_model
     from identification.support import long_run_ratio
 
-    split = _names
     noted: tuple = ()  # (data, library) once both are known: their notes precede a refusal
 
     lam_value = _number_option("--lambda", lam, float, low=0.0) if lam != "auto" else None
@@ -460,16 +459,16 @@ def identify(
         ):
             preset = library
         in_spec = list(spec_angles(library))
-        if split(angles) and in_spec and set(split(angles) or ()) != set(in_spec):
+        if _names(angles) and in_spec and set(_names(angles) or ()) != set(in_spec):
             _fail(
                 f"--angles {angles} and the library's angles={','.join(in_spec)} disagree: "
                 "declare the angles once"
             )
-        declared = split(angles) or in_spec or list(PRESET_ANGLES.get(preset or "", ()))
-        read = (data, split(columns), preset, split(states), split(inputs), time.strip())
+        declared = _names(angles) or in_spec or list(PRESET_ANGLES.get(preset or "", ()))
+        read = (data, _names(columns), preset, _names(states), _names(inputs), time.strip())
         unit = SECONDS_PER[time_unit.value]
         turn = RADIANS_PER[angle_unit.value]
-        trajs, cleaning = load_data(*read, angles=declared, measured=split(measured) or (),
+        trajs, cleaning = load_data(*read, angles=declared, measured=_names(measured) or (),
                                     time_unit=unit, angle_unit=turn)  # fmt: skip
         first = trajs[0]
         library_note = None
@@ -482,7 +481,7 @@ def identify(
                     "variables; --library or --angles choose another)"
                 )
                 declared = list(PRESET_ANGLES.get(preset, ()))
-                as_preset = (data, split(columns), preset, None, None, time.strip())
+                as_preset = (data, _names(columns), preset, None, None, time.strip())
                 trajs, cleaning = load_data(*as_preset, angles=declared, measured=first.measured,
                                             time_unit=unit, angle_unit=turn)  # fmt: skip
                 first = trajs[0]
