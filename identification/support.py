@@ -399,7 +399,8 @@ def grow_significant(
     best support of the same size is taken when the data tell it from the current one
     (F-test, p = 0.001): the path's twin choices, each within the F-test of the one before,
     can add up to a support the data reject; :func:`resolve_collinear` then moves back to
-    simpler twins only within the F-test of it.
+    simpler twins only within the F-test of it. Last, :func:`add_reinforcing_twins` adds
+    near twins that the data need beside their partners and that do not cancel them.
 
     Returns:
         The coefficients (refitted where changed) and one note per equation grown.
