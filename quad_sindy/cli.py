@@ -191,8 +191,8 @@ def simulate(
     header, rows = run.table()
     bad = ~np.isfinite(rows).all(axis=1)
     if bad.any():
-        _fail(f"the simulation left finite numbers at t = {run.t[bad][0]:g} s (--dt {dt:g} "
-              "too coarse for the vehicle, or a parameter it cannot fly with)")  # fmt: skip
+        _fail(f"the simulation gave non-finite numbers at t = {run.t[bad][0]:g} s (--dt "
+              f"{dt:g} too coarse for the vehicle, or a parameter it cannot fly with)")  # fmt: skip
     write_csv(out, header, rows)
     typer.echo(f"wrote {len(rows)} rows to {out}")
     angles = [i for i, n in enumerate(run.vehicle.state_names) if n in ("phi", "theta")]
