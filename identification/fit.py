@@ -514,11 +514,19 @@ def _relation(
     coef = np.linalg.lstsq(unit[:, among], unit[:, j], rcond=None)[0]
     order = [k for k in np.argsort(-np.abs(coef)) if abs(coef[k]) > 1e-3 * np.abs(coef).max()]
     data = coef * norm[j] / norm[among]
-    terms = " ".join(f"{'-' if data[k] < 0 else '+'} {abs(data[k]):.4g}"
-                     + ("" if names[among[k]] == "1" else f" {names[among[k]]}")
-                     for k in order[:5])  # fmt: skip
+    terms = " ".join(_signed(data[k], names[among[k]]) for k in order[:5])
     text = f"{names[j]} = {terms.removeprefix('+ ')}{' ...' if len(order) > 5 else ''}"
     return text, [names[among[k]] for k in order]
+
+
+def _signed(value: float, name: str) -> str:
+    """``+ 2.5 u1``, ``- qw^2`` (a unit coefficient of a term is not written), ``- 9.81``."""
+    size = f"{abs(value):.4g}"
+    if name == "1":
+        part = size
+    else:
+        part = name if size == "1" else f"{size} {name}"
+    return f"{'-' if value < 0 else '+'} {part}"
 
 
 def _collinear_message(
@@ -573,8 +581,15 @@ def _collinear_message(
             f"in which {name} also moves independently of the states (dither on it, reference "
             "changes)"
         )
+    if not carried and first.size:  # states only: perhaps an identity no data can break
+        return head + (
+            f": record data in which they vary independently (other inputs, larger angles); "
+            f"if the relation is an identity of the variables (a unit quaternion, a conserved "
+            f"quantity), no data will, so leave a term out of the library (a spec's "
+            f"exclude={names[int(first[0])]} drops it and its products)"
+        )
     return head + (": record data in which they vary independently (other inputs, larger "
-                   "angles), or remove all but one of them")  # fmt: skip
+                   "angles), or leave one of them out of the library")  # fmt: skip
 
 
 FEEDBACK_FACTOR = 3.0

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pysindy as ps
 
-from identification.features import parse_term, term_name
+from identification.features import Term, parse_term, term_name
 
 
 def paper_planar_library(include_duplicate: bool = True) -> ps.GeneralizedLibrary:
@@ -214,6 +214,12 @@ class LibrarySpec:
         multipliers: The variables whose monomials multiply the trig factors (e.g. the
             rates and the rotor inputs, leaving positions out); empty: the
             trig_products / input_products rule. When given it replaces that rule.
+        exclude: Factors to leave out: every built term that holds one of them is dropped
+            (``qw^2`` drops ``qw^2``, ``qw^3`` and ``qw^2 vx`` but not ``qw vx``; ``px``
+            drops every term with ``px``; ``1`` drops the constant only). Terms listed in
+            ``extra`` are kept. For identities of the variables that no data can break
+            (a unit quaternion: ``qw^2 + qx^2 + qy^2 + qz^2 = 1``) and for variables that
+            should not enter (positions).
     """
 
     degree: int = 2
@@ -228,6 +234,7 @@ class LibrarySpec:
     functions: tuple[str, ...] = ("sin", "cos")
     angle_products: bool = False
     multipliers: tuple[str, ...] = field(default_factory=tuple)
+    exclude: tuple[str, ...] = field(default_factory=tuple)
 
     def build(self, state_names: Sequence[str], input_names: Sequence[str]) -> list[str]:
         """The feature names for these variables (duplicates removed, order kept).
@@ -260,11 +267,15 @@ class LibrarySpec:
         for d in range(1, self.trig_degree + 1):
             monomials += [" ".join(c) for c in itertools.combinations_with_replacement(mult, d)]
         names += [f"{m} {f}" if m else f for f in fourier for m in monomials]
+        extra = range(len(names), len(names) + len(self.extra))  # kept whatever exclude says
         names += list(self.extra)
         if self.drag:
             names += drag_terms(self.drag, self.drag_angle or None)
-        canonical = [term_name(parse_term(n, variables)) for n in names]
-        return list(dict.fromkeys(canonical))
+        dropped = [parse_term(e, variables) for e in self.exclude]
+        terms = [parse_term(n, variables) for n in names]
+        kept = [t for i, t in enumerate(terms)
+                if i in extra or not any(_holds(t, d) for d in dropped)]  # fmt: skip
+        return list(dict.fromkeys(term_name(t) for t in kept))
 
     def _angle_factors(self) -> dict[str, list[str]]:
         """Each angle's factors: for k = 1..frequencies, each function that applies to it."""
@@ -327,6 +338,17 @@ class LibrarySpec:
             )
 
 
+def _holds(term: Term, part: Term) -> bool:
+    """Whether ``term`` holds every factor of ``part`` (a power at least as high).
+
+    The constant (the empty ``part``) is held by the constant only.
+    """
+    if not part:
+        return not term
+    have = {(f.var, f.kind, f.k if f.kind != "pow" else 0): f.k for f in term}
+    return all(have.get((f.var, f.kind, f.k if f.kind != "pow" else 0), 0) >= f.k for f in part)
+
+
 def _parse_spec_text(text: str) -> dict[str, object]:
     """``degree=2;angles=phi,theta;extra=u1 sin(phi),y_dot^3`` -> a dict for LibrarySpec."""
     out: dict[str, object] = {}
@@ -366,7 +388,7 @@ def _check_fields(fields: dict[str, object], source: str) -> dict[str, object]:
             if not isinstance(value, bool):
                 raise ValueError(f"{source}: {key} must be true or false, got {value!r}")
             out[key] = value
-        elif key in ("angles", "extra", "drag", "functions", "multipliers"):
+        elif key in ("angles", "extra", "drag", "functions", "multipliers", "exclude"):
             items = value.split(",") if isinstance(value, str) else value
             if not isinstance(items, list | tuple) or not all(isinstance(v, str) for v in items):
                 raise ValueError(

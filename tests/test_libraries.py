@@ -343,3 +343,90 @@ def test_motor_speed_flights_give_the_exact_model_with_trig_degree_2():
              for i, j in zip(*np.nonzero(model.coefficients), strict=True)}  # fmt: skip
     assert set(found) == set(truth), (set(found) - set(truth), set(truth) - set(found))
     assert all(abs(found[k] / truth[k] - 1) < 1e-4 for k in truth)
+
+
+def test_exclude_drops_every_built_term_holding_a_factor_and_keeps_extra_terms():
+    names = library_from_spec("degree=3;exclude=qw^2,px,1;extra=px qw^2", ["px", "qw", "vx"], [])
+    full = library_from_spec("degree=3", ["px", "qw", "vx"], [])
+    gone = set(full) - set(names)
+    held = {n for n in full if n == "1" or "px" in n or "qw^2" in n or "qw^3" in n}
+    assert gone == held - {canon("px qw^2")}
+    assert "qw vx" in names and "qw" in names  # a lower power is not the factor qw^2
+    assert canon("px qw^2") in names  # listed in extra: kept
+    trig = library_from_spec("degree=1;angles=phi;exclude=sin(phi)", ["phi", "w"], ["u"])
+    assert "cos(phi) w" in trig and not any("sin" in n for n in trig)
+    with pytest.raises(ValueError, match="unknown variable"):
+        library_from_spec("degree=2;exclude=nope", ["px", "qw"], [])
+
+
+QM, QJ = 1.3, np.array([0.011, 0.013, 0.021])
+QUAT_STATES = ("vx", "vy", "vz", "qw", "qx", "qy", "qz", "wx", "wy", "wz")
+
+
+def quaternion_rhs(s: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """A rigid body with world velocity, unit quaternion (scalar first, body to world) and
+    body rates; collective thrust along body z and body moments (not quad-sindy's model)."""
+    (qw, qx, qy, qz), w = s[3:7], s[7:]
+    thrust_dir = np.array([2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx),
+                           1 - 2 * (qx * qx + qy * qy)])  # fmt: skip
+    dq = 0.5 * np.array([-qx * w[0] - qy * w[1] - qz * w[2],
+                         qw * w[0] + qy * w[2] - qz * w[1],
+                         qw * w[1] - qx * w[2] + qz * w[0],
+                         qw * w[2] + qx * w[1] - qy * w[0]])  # fmt: skip
+    acc = u[0] / QM * thrust_dir - np.array([0.0, 0.0, G])
+    return np.concatenate([acc, dq, (u[1:] - np.cross(w, QJ * w)) / QJ])
+
+
+def quaternion_flight(seed: int, rows: int = 600, dt: float = 0.01) -> Trajectory:
+    """Attitude PD to random targets plus input noise, 10 RK4 substeps a sample."""
+    rng = np.random.default_rng(seed)
+    state = np.zeros(10)
+    state[3] = 1.0
+    states, inputs = [state], []
+    for k in range(rows - 1):
+        if k % 150 == 0:
+            target = rng.uniform(-0.2, 0.2, 3) * [1, 1, 3]
+        qw, qx, qy, qz = state[3:7]
+        attitude = 2 * np.array([qx, qy, qz]) * np.sign(qw)  # small-angle attitude
+        moments = QJ * (36 * (target - attitude) - 10 * state[7:]) + rng.normal(0, 1.5, 3) * QJ
+        thrust = QM * (G - 2 * state[2]) * (1 + rng.normal(0, 0.05))
+        u = np.concatenate([[thrust], moments])
+        h = dt / 10
+        for _ in range(10):
+            k1 = quaternion_rhs(state, u)
+            k2 = quaternion_rhs(state + h / 2 * k1, u)
+            k3 = quaternion_rhs(state + h / 2 * k2, u)
+            k4 = quaternion_rhs(state + h * k3, u)
+            state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        states.append(state)
+        inputs.append(u)
+    inputs.append(inputs[-1])
+    return Trajectory(np.arange(rows) * dt, np.array(states), np.array(inputs), QUAT_STATES,
+                      ("T", "Mx", "My", "Mz"))  # fmt: skip
+
+
+def test_a_unit_quaternion_identity_is_refused_with_the_way_out_and_excluding_it_is_exact():
+    trajs = [quaternion_flight(seed) for seed in (21, 22, 23)]
+    norms = np.concatenate([np.linalg.norm(tr.x[:, 3:7], axis=1) for tr in trajs])
+    assert np.abs(norms - 1).max() < 1e-9  # the identity holds to round-off
+    with pytest.raises(ValueError, match=r"unit quaternion.*exclude=q"):
+        select_model(trajs, "degree=3", windows=(1,), n_models=0)
+    model, _ = select_model(trajs, "degree=3;exclude=qz^2", windows=(1, 4), n_models=0)
+    (jx, jy, jz), m = QJ, QM
+    truth = {
+        ("vx", "T qw qy"): 2 / m, ("vx", "T qx qz"): 2 / m,
+        ("vy", "T qw qx"): -2 / m, ("vy", "T qy qz"): 2 / m,
+        ("vz", "1"): -G, ("vz", "T"): 1 / m, ("vz", "T qx^2"): -2 / m, ("vz", "T qy^2"): -2 / m,
+        ("qw", "qx wx"): -0.5, ("qw", "qy wy"): -0.5, ("qw", "qz wz"): -0.5,
+        ("qx", "qw wx"): 0.5, ("qx", "qy wz"): 0.5, ("qx", "qz wy"): -0.5,
+        ("qy", "qw wy"): 0.5, ("qy", "qx wz"): -0.5, ("qy", "qz wx"): 0.5,
+        ("qz", "qw wz"): 0.5, ("qz", "qx wy"): 0.5, ("qz", "qy wx"): -0.5,
+        ("wx", "Mx"): 1 / jx, ("wx", "wy wz"): (jy - jz) / jx,
+        ("wy", "My"): 1 / jy, ("wy", "wx wz"): (jz - jx) / jy,
+        ("wz", "Mz"): 1 / jz, ("wz", "wx wy"): (jx - jy) / jz,
+    }  # fmt: skip
+    truth = {(s, canon(n)): v for (s, n), v in truth.items()}
+    found = {(model.state_names[i], canon(model.feature_names[j])): model.coefficients[i, j]
+             for i, j in zip(*np.nonzero(model.coefficients), strict=True)}  # fmt: skip
+    assert set(found) == set(truth), (set(found) - set(truth), set(truth) - set(found))
+    assert all(abs(found[k] / truth[k] - 1) < 1e-6 for k in truth)
