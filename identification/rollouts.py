@@ -131,16 +131,23 @@ def excitation_rollouts(
         seed: Seed of waypoints, noise and resets.
         steps: Steps per flight.
         noise: Action noise as a fraction of the action box half-width.
-        env_kwargs: Passed to ``gym.make`` (``params=`` flies another vehicle).
+        env_kwargs: Passed to ``gym.make`` (``params=`` flies another vehicle; any
+            ``action_mode`` and ``normalize_actions``: the controller's collective command
+            goes through the env's :meth:`action_from_input`).
         record: ``truth`` or ``measured`` (see :func:`collect_rollouts`).
 
     Returns:
         The recorded trajectories.
     """
     env_kwargs = {"duration": steps * 0.01 + 1.0, **(env_kwargs or {})}
-    probe = gym.make(env_id, **env_kwargs)
+    try:
+        probe = gym.make(env_id, **env_kwargs)
+    except gym.error.Error as exc:
+        raise ValueError(f"unknown or unusable env id {env_id!r}: {exc}") from None
     vehicle = probe.unwrapped.vehicle
-    probe.close()
+    # the controller commands the collective input; the env's action may be rotor thrusts,
+    # motor speeds or normalised to [-1, 1] (a trial's flights fell in 8 rows without this)
+    to_action = probe.unwrapped.action_from_input
     pd = vehicle.default_controller()
     planar = vehicle.ndim == 2
     ndim = vehicle.ndim
@@ -154,14 +161,17 @@ def excitation_rollouts(
         )  # fmt: skip
         return {"trajectory": ref}
 
-    return collect_rollouts(
-        env_id,
-        lambda obs, info: pd(info["state"], info["reference"]),
-        episodes=episodes,
-        seed=seed,
-        action_noise=noise,
-        max_steps=steps,
-        env_kwargs=env_kwargs,
-        reset_options=options,
-        record=record,
-    )
+    try:
+        return collect_rollouts(
+            env_id,
+            lambda obs, info: to_action(pd(info["state"], info["reference"])),
+            episodes=episodes,
+            seed=seed,
+            action_noise=noise,
+            max_steps=steps,
+            env_kwargs=env_kwargs,
+            reset_options=options,
+            record=record,
+        )
+    finally:
+        probe.close()

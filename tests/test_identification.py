@@ -176,6 +176,20 @@ def test_rollouts_record_applied_inputs():
     np.testing.assert_allclose(states, trajs[0].x, atol=1e-9)
 
 
+@pytest.mark.parametrize("env_kwargs", [{"action_mode": "rotor_thrusts"},
+                                        {"normalize_actions": True}])  # fmt: skip
+def test_excitation_rollouts_fly_every_action_mode_as_the_collective_one(env_kwargs):
+    """The controller's collective command goes through the env's action mapping (a trial's
+    rotor-thrust and normalised flights fell after 8 to 112 rows, exit 0): without noise
+    the flights are the collective mode's, input for input."""
+    base = excitation_rollouts("PlanarQuad-v0", episodes=1, seed=3, steps=300, noise=0.0)
+    other = excitation_rollouts("PlanarQuad-v0", episodes=1, seed=3, steps=300, noise=0.0,
+                                env_kwargs=env_kwargs)  # fmt: skip
+    assert len(other[0]) == len(base[0]) == 300
+    np.testing.assert_allclose(other[0].u, base[0].u, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(other[0].x, base[0].x, rtol=1e-4, atol=1e-5)
+
+
 def test_simulate_takes_each_rows_own_step():
     """A log's jittery steps: step k lasts dt[k] (a fixed step only, before)."""
     model = model_from_truth("planar")
