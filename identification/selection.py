@@ -522,7 +522,14 @@ def select_model(
     final_gram = Gram.stack(grams(used, names, "rk4", best.window, xi))
     ratio = long_run_ratio(used, names, xi, best.window)
     path_xi = xi
-    xi, notes = restart_centred(xi, final_gram, ratio, names, first.state_names)
+
+    def ratio_of(i: int, row: np.ndarray) -> float:
+        trial = xi.copy()
+        trial[i] = row
+        return float(long_run_ratio(used, names, trial, best.window)[i])
+
+    xi, notes = restart_centred(xi, final_gram, ratio, names, first.state_names,
+                                (best.lam, ratio_of))  # fmt: skip
     report.warnings += notes
     xi, notes = grow_significant(xi, final_gram, ratio, names, first.state_names)
     report.warnings += notes

@@ -190,6 +190,38 @@ def test_centred_restart_replaces_a_support_built_around_a_cancelling_pair():
         assert np.array_equal(same, right) and notes == []
 
 
+def test_an_equation_left_empty_is_filled_by_the_centred_path_only_past_the_threshold():
+    """Hover: ``w' = u1 / m - g`` with u1 near m g, so neither the constant nor u1 gains
+    anything alone and the greedy path leaves the equation empty. The centred path fills it
+    with the true pair where its first entry passes the chosen threshold; a threshold above
+    that entry's share, a pure-noise target and no ``fill`` leave it empty."""
+    from identification.fit import Gram
+    from identification.support import restart_centred
+
+    rng = np.random.default_rng(1)
+    n = 3000
+    t = np.arange(n) * 0.01
+    u1 = 1.3 * 9.81 * (1 + 0.05 * np.sin(1.7 * t) + 0.02 * rng.normal(size=n))
+    cols = {"1": np.ones(n), "u1": u1, "z": np.sin(0.4 * t), "z_dot": np.cos(0.9 * t),
+            "phi": 0.1 * np.sin(2.3 * t)}  # fmt: skip
+    names = list(cols)
+    theta = np.column_stack(list(cols.values()))
+    exact = u1 / 1.3 - 9.81
+    one = lambda i, row: 1.0  # noqa: E731  (white residuals)
+    gram = Gram.from_rows(theta, (exact + 0.3 * rng.normal(size=n))[:, None])  # share ~0.75
+    empty = np.zeros((1, len(names)))
+    xi, notes = restart_centred(empty, gram, np.ones(1), names, ["w"], (0.3, one))
+    assert list(np.flatnonzero(xi[0])) == [0, 1]
+    np.testing.assert_allclose(xi[0, :2], [-9.81, 1 / 1.3], rtol=3e-2)
+    assert "left it empty" in notes[0] and "'1', 'u1'" in notes[0]
+    for fill in ((0.95, one), None):  # above the first entry's share of the target; no fill
+        same, notes = restart_centred(empty, gram, np.ones(1), names, ["w"], fill)
+        assert not np.any(same) and notes == []
+    noise = Gram.from_rows(theta, rng.normal(size=(n, 1)))
+    same, notes = restart_centred(empty, noise, np.ones(1), names, ["w"], (1e-3, one))
+    assert not np.any(same) and notes == []
+
+
 def test_exchange_and_add_replaces_a_stand_in_that_holds_two_true_terms(monkeypatch):
     """`a` stands in for the true `b` and the small `c` together (the best single column, and
     neither exchanging it for `b` nor adding `c` alone gains enough); one exchange plus one
