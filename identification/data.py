@@ -313,6 +313,10 @@ def validate(traj: Trajectory) -> None:
         )
 
 
+class ShortLog(ValueError):
+    """A log with no segment long enough to keep (:func:`clean`)."""
+
+
 @dataclass
 class CleanReport:
     """What :func:`clean` changed.
@@ -563,9 +567,9 @@ def clean(
             segments += segs
             report = report.merge(rep)
         if not segments:
-            raise ValueError(f"no segment of at least {min_rows} clean rows in the log's "
-                             f"{restarts.size + 1} parts (its time goes back {restarts.size} "
-                             "time(s))")  # fmt: skip
+            raise ShortLog(f"no segment of at least {min_rows} clean rows in the log's "
+                           f"{restarts.size + 1} parts (its time goes back {restarts.size} "
+                           "time(s))")  # fmt: skip
         return segments, report
     for values, names in ((x, state_names), (u, input_names)):
         empty = [n for j, n in enumerate(names) if t.size and not np.isfinite(values[:, j]).any()]
@@ -697,7 +701,7 @@ def clean(
         dev = np.abs(seg.steps / own - 1.0).max() if own else 0.0
         report.jitter = max(report.jitter, float(dev))
     if not segments:
-        raise ValueError(
+        raise ShortLog(
             f"no segment of at least {min_rows} clean rows (log has {t.size} rows with "
             f"{report.gaps} gaps): record longer uninterrupted stretches"
         )
@@ -1418,6 +1422,7 @@ def load_data(
     report = CleanReport()
     first: tuple[str, tuple[str, ...]] | None = None
     steps: dict[str, float] = {}
+    short: list[tuple[str, str]] = []  # files with no segment long enough: left out
     for path in paths:
         try:
             if is_npz_archive(path):
@@ -1433,6 +1438,9 @@ def load_data(
                 segs, rep = read_log(path, columns, system, states, inputs, time, angles,
                                      measured, time_unit, angle_unit)  # fmt: skip
                 report = report.merge(rep)
+        except ShortLog as exc:  # an episode that ended early: the others may do
+            short.append((str(path), str(exc)))
+            continue
         except ValueError as exc:
             message = str(exc)
             raise ValueError(message if str(path) in message else f"{path}: {message}") from None
@@ -1458,6 +1466,14 @@ def load_data(
                 f"{slow} steps {steps[slow]:g} per row but {fast} steps {steps[fast]:g}: "
                 "are their time columns in the same unit? (--time-unit; time_unit= in Python)"
             )
+    if short and not trajs:
+        path, message = short[0]
+        more = f" (and so do the {len(short) - 1} other file(s))" if len(short) > 1 else ""
+        raise ShortLog(f"{path}: {message}{more}")
+    if short:
+        names = ", ".join(Path(p).name for p, _ in short[:3]) + (" ..." if len(short) > 3 else "")
+        report.notes = [*report.notes, f"left out {len(short)} file(s) with no segment long "
+                        f"enough to fit ({names}): {short[0][1].split(' (')[0]}"]  # fmt: skip
     return trajs, report
 
 
