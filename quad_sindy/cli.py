@@ -435,6 +435,7 @@ def identify(
         stamp_jitter,
         state_shift_note,
     )
+    from identification.features import parse_term
     from identification.fit import FitConfig, fit
     from identification.libraries import library_from_spec, spec_angles
     from identification.scoring import long_enough, typical_length
@@ -506,8 +507,9 @@ def identify(
                 library or preset, first.state_names, first.input_names, declared
             )
             noted = (trajs, lib)
-            looks = [n for n in first.state_names if _looks_like_angle(n)]
-            if looks and not declared and preset is None:
+            as_power = {f.var for n in lib for f in parse_term(n) if f.kind == "pow"}
+            looks = [n for n in first.state_names if _looks_like_angle(n) and n in as_power]
+            if looks and not declared and preset is None:  # (a drag preset's angles are trig)
                 typer.echo(
                     f"note: {', '.join(looks)} {'looks' if len(looks) == 1 else 'look'} like "
                     f"angle{'s' if len(looks) > 1 else ''} but no angle is declared: "

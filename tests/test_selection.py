@@ -340,6 +340,11 @@ def test_cli_identify_any_names_and_show(tmp_path, other_clean):
     bare = CliRunner().invoke(app, ["identify", *paths, "--out", str(tmp_path / "bare.json"),
                                     "--inputs", "thrust,moment", "--lambda", "0.001"])  # fmt: skip
     assert "note: roll looks like angle but no angle is declared" in bare.output
+    trig = CliRunner().invoke(app, ["identify", *paths, "--out", str(tmp_path / "trig.json"),
+                                    "--inputs", "thrust,moment", "--lambda", "0.001", "--library",
+                                    "degree=0;extra=a_dot,b_dot,roll_dot,moment,"
+                                    "sin(roll) thrust,cos(roll) thrust"])  # fmt: skip
+    assert trig.exit_code == 0 and "like angle" not in trig.output  # roll only in sin and cos
     assert "without an angle's name" not in result.output  # roll is one
     odd = CliRunner().invoke(app, ["identify", *paths, "--out", str(tmp_path / "odd.json"),
                                    "--inputs", "thrust,moment", "--angles", "roll,a",
