@@ -84,8 +84,13 @@ def _mismatch(model: IdentifiedModel, base_id: str, theirs: tuple) -> str:
     owner = next(iter(vehicles_with(model.state_names, model.input_names)), None)
     if owner is not None:
         return head + f": it is a model of the {owner} vehicle; use that vehicle's env"
-    return head + (": a surrogate steps its vehicle's variables, so identify from a log with "
-                   "those names (--columns renames a CSV's)")  # fmt: skip
+    return head + (
+        f": a surrogate steps its vehicle's variables, so identify from a log of those "
+        f"quantities (inputs {', '.join(theirs[1])}: the collective thrust and moments, what "
+        "the env reports as info['action'] in every action mode); --columns renames a CSV's "
+        "columns only where they hold the same quantities (rotor thrusts or motor speeds "
+        "renamed u1, u2 give a wrong surrogate)"
+    )
 
 
 def surrogate_rhs(model: IdentifiedModel, cls: Any, compiled: bool = True) -> Any:

@@ -118,6 +118,11 @@ def test_surrogate_steps_say_how_far_they_leave_the_training_range():
 def test_surrogate_rejects_mismatched_models():
     with pytest.raises(ValueError, match="do not match"):
         make_surrogate(model_from_truth("planar"), "Quad6DOF-v0")
+    truth = model_from_truth("planar")  # the same model with per-rotor input names
+    names = [n.replace("u1", "f1").replace("u2", "f2") for n in truth.feature_names]
+    rotors = IdentifiedModel(names, truth.coefficients, truth.state_names, ("f1", "f2"))
+    with pytest.raises(ValueError, match=r"info\['action'\].*renamed u1, u2 give a wrong"):
+        make_surrogate(rotors, "PlanarQuad-v0")
     with pytest.raises(ValueError, match="needs model"):
         gym.make("PlanarQuadSINDy-v0")
     with pytest.raises(ValueError, match="valid choices"):
