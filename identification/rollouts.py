@@ -146,8 +146,11 @@ def excitation_rollouts(
         raise ValueError(f"unknown or unusable env id {env_id!r}: {exc}") from None
     vehicle = probe.unwrapped.vehicle
     # the controller commands the collective input; the env's action may be rotor thrusts,
-    # motor speeds or normalised to [-1, 1] (a trial's flights fell in 8 rows without this)
-    to_action = probe.unwrapped.action_from_input
+    # motor speeds or normalised to [-1, 1] (a trial's flights fell in 8 rows without this).
+    # The collective action goes as it is: the noise is added before the box's clipping.
+    base = probe.unwrapped
+    plain = base.action_mode == "collective" and not base.normalize_actions
+    to_action = (lambda u: u) if plain else base.action_from_input
     pd = vehicle.default_controller()
     planar = vehicle.ndim == 2
     ndim = vehicle.ndim
