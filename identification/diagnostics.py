@@ -187,6 +187,78 @@ def misfit_note(
     )
 
 
+DISAGREE_P, DISAGREE_SPREAD = 1e-3, 0.1
+"""A term's per-log coefficients disagree where their spread is beyond their noise (a
+chi-square at ``DISAGREE_P``, Bonferroni over the terms tested) and the largest differs from
+the smallest by more than ``DISAGREE_SPREAD`` of the pooled value."""
+
+
+def disagreement_note(
+    trajs: Sequence[Trajectory],
+    names: Sequence[str],
+    window: int,
+    xi: np.ndarray,
+    ratio: np.ndarray,
+) -> str | None:
+    """A warning where the model's terms, refitted on each log alone, differ between logs.
+
+    Pooled flights of different vehicles (payloads, batteries, `param_randomization`) get
+    one model that fits none of them: a trial's four planar flights, each identified
+    exactly alone (1/m from 1.54 to 2.22), gave gravity -5.2 and terms in `sin(phi) z`
+    pooled, with warnings that blamed the library or the noise. Each equation's support is
+    refitted on each segment of at least 5 rows a term; where a coefficient's estimates
+    differ by more than their standard errors allow (residual variance times the long-run
+    ``ratio``) and by more than :data:`DISAGREE_SPREAD` of the pooled value, the worst term
+    is named. A library that lacks a term varying between the logs does the same, so the
+    note names both causes.
+    """
+    from scipy.stats import chi2
+
+    from identification.support import least_squares
+
+    if len(trajs) < 2 or not np.any(xi):
+        return None
+    parts = grams(list(trajs), list(names), "rk4", window, xi)
+    found = []  # (excess over the bar, state, term, low, high, logs)
+    tested = int(np.count_nonzero(xi))
+    for i in range(xi.shape[0]):
+        support = [int(j) for j in np.flatnonzero(xi[i])]
+        est, var = [], []
+        for g in parts:
+            if g.rows < max(5 * len(support), MIN_UNIT_ROWS):
+                continue
+            rss, coef = least_squares(g.r, g.z[:, i], support)
+            total = float(np.linalg.norm(g.r_aug[:, g.p + i]) ** 2)
+            outside = max(total - float(g.z[:, i] @ g.z[:, i]), 0.0)
+            sigma2 = (rss + outside) / max(g.rows - len(support), 1) * max(float(ratio[i]), 1.0)
+            inverse = np.linalg.pinv(g.r[:, support].T @ g.r[:, support])
+            est.append(coef)
+            var.append(sigma2 * np.diag(inverse))
+        if len(est) < 2:
+            continue
+        est, var = np.array(est), np.maximum(np.array(var), 1e-300)
+        weights = 1.0 / var
+        pooled = (weights * est).sum(axis=0) / weights.sum(axis=0)
+        chi = (((est - pooled) ** 2) * weights).sum(axis=0)
+        bar = chi2.isf(DISAGREE_P / max(tested, 1), len(est) - 1)
+        spread = (est.max(axis=0) - est.min(axis=0)) / np.maximum(np.abs(pooled), 1e-300)
+        for k in np.flatnonzero((chi > bar) & (spread > DISAGREE_SPREAD)):
+            found.append((chi[k] / bar, i, support[k], est[:, k].min(), est[:, k].max(),
+                          len(est)))  # fmt: skip
+    if not found:
+        return None
+    _, i, j, low, high, logs = max(found)
+    states = trajs[0].state_names
+    more = f" (and {len(found) - 1} other term(s))" if len(found) > 1 else ""
+    return (
+        f"the logs disagree: refitted on each of {logs} segments alone, '{names[j]}' in "
+        f"{states[i]}' ranges from {low:.4g} to {high:.4g}{more}, beyond what their noise "
+        "allows: the library lacks a term that varies between the logs, or logs of "
+        "different vehicles (payloads, batteries) were pooled, which no one model fits "
+        "(identify each vehicle's logs on its own)"
+    )
+
+
 INPUT_SHIFTS = (-3, -2, -1, 1, 2, 3)
 """Shifts of the inputs [rows] that :func:`input_shift_note` tries."""
 

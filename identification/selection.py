@@ -76,6 +76,7 @@ from identification.diagnostics import (
     angle_offset_note,
     cut_steps,
     data_warnings,
+    disagreement_note,
     input_shift_note,
     misfit_note,
     outlier_note,
@@ -590,6 +591,9 @@ def select_model(
     misfit = misfit_note(used, names, base.derivative, xi, outliers=named)
     if misfit:
         report.warnings.append(misfit)
+    disagree = disagreement_note(used, names, best.window, xi, ratio)
+    if disagree:
+        report.warnings.append(disagree)
     report.final_terms = int(np.count_nonzero(xi))
     tally = TALLY.summary()
     if tally:

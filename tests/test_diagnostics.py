@@ -251,6 +251,31 @@ def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean
     assert len(said) == 1 and said[0].startswith("the residual of z_dot' ("), said
 
 
+def test_logs_of_two_vehicles_pooled_are_named_and_one_vehicles_noisy_logs_are_not(other_clean):
+    """A trial pooled four flights of randomised vehicles (each exact alone) into one wrong
+    model, with warnings that blamed the library or the noise. Refitted on each log alone,
+    the terms of two vehicles (the second 1.6 times heavier, 1.5 times the inertia) differ
+    beyond their noise; one vehicle's flights at sigma = 1e-2 do not."""
+    from identification.diagnostics import disagreement_note
+    from identification.experiments.truth import truth_matrix
+
+    names = planar_library()
+    exact = truth_matrix(truth_planar(OTHER_PLANAR), PS, names)
+    heavy = dataclasses.replace(OTHER_PLANAR, mass=0.8, Ixx=4.5e-3, rotor_force_max=0.8 * 9.81)
+    other = planar_flights(heavy, FlightSpec(flights=2, seed=5))
+    for sigma in (0.0, 1e-2):
+        one = add_noise(other_clean, sigma, seed=2) if sigma else other_clean
+        assert disagreement_note(one, names, 4, exact, np.ones(6)) is None, sigma
+        both = [*one, *(add_noise(other, sigma, seed=3) if sigma else other)]
+        note = disagreement_note(both, names, 4, exact, np.ones(6))
+        assert note is not None and note.startswith("the logs disagree: refitted on each of 5")
+        text = note.split(" ranges from ")[1].split(" (")[0].split(",")[0]
+        low, high = (float(v) for v in text.split(" to "))
+        assert high / low > 1.4  # 1/m or 1/Ixx: 1.6 and 1.5 times apart
+    _, report = select_model([*other_clean, *other], names, **FAST)
+    assert any(w.startswith("the logs disagree") for w in report.warnings), report.warnings
+
+
 def test_a_model_records_its_training_range_and_score_names_data_beyond_it(tmp_path, other_clean):
     """Cross-validation tests a model only where its flights went; a held-out flight past
     that (a trial: yaw beyond the training range, 17.5 % at 1 s) is named by ``score``."""
