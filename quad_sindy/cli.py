@@ -127,6 +127,12 @@ ParamOption = Annotated[
 ]
 
 
+def _effects(text: str) -> str | list[str]:
+    """``--effects`` text: ``all`` or a list of effect names."""
+    names = [e.strip() for e in text.split(",") if e.strip()]
+    return "all" if names == ["all"] else names
+
+
 def _vehicle_options(vehicle: str | None, param: list[str] | None) -> dict[str, object]:
     """Env options for ``--vehicle`` and ``--param`` (the vehicle a model was identified on)."""
     options: dict[str, object] = {"vehicle": vehicle} if vehicle else {}
@@ -903,11 +909,16 @@ def compare(
     tolerance: Annotated[float, typer.Option(help="state gap that counts as parting")] = 1e-3,
     vehicle: VehicleOption = None,
     param: ParamOption = None,
+    effects: Annotated[
+        str | None,
+        typer.Option(help="effects of the ground truth only, e.g. drag or drag,wind or all"),
+    ] = None,
 ) -> None:
     """The same policy and initial state in the ground truth and in the surrogate.
 
     Both fly the env's vehicle (``--vehicle``, ``--param``; the paper vehicle by default):
-    set it to the vehicle the model was identified on.
+    set it to the vehicle the model was identified on. ``--effects`` switches the ground
+    truth's effects on (a model identified on drag data holds the drag itself).
     """
     import numpy as np
 
@@ -930,13 +941,14 @@ def compare(
     try:
         identified = load_model(model)
         options = _vehicle_options(vehicle, param)
-        make_policy(policy.value, env, seed=seed, **options)  # validates names before flying
+        truth = {"effects": _effects(effects)} if effects else {}
+        make_policy(policy.value, env, seed=seed, **options, **truth)  # validates names
 
         def factory() -> object:
-            return make_policy(policy.value, env, seed=seed, **options)
+            return make_policy(policy.value, env, seed=seed, **options, **truth)
 
         comp = compare_envs(identified, env, factory, case, seed, tolerance=tolerance,
-                            env_kwargs=options)  # fmt: skip
+                            env_kwargs=options, truth_kwargs=truth)  # fmt: skip
     except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc))
     summary = write_comparison(comp, out)
@@ -1133,8 +1145,7 @@ def mbrl(
         _fail("parallel runs need Ray: pip install 'quad-sindy[ray]' (or --workers 1)")
     env_options: dict[str, object] = _vehicle_options(vehicle, param)
     if effects:
-        names = [e.strip() for e in effects.split(",") if e.strip()]
-        env_options["effects"] = "all" if names == ["all"] else names
+        env_options["effects"] = _effects(effects)
     try:
         gym.spec(env)
     except gym.error.Error as exc:

@@ -258,6 +258,13 @@ def test_a_surrogate_of_another_vehicle_warns_on_the_paper_vehicle_and_flies_on_
         cli.main()
     out, err = capsys.readouterr()
     assert code.value.code == 0 and "parted by > 0.001: never" in out and "warning" not in err
+    # --effects reach the ground truth only: this drag-free model parts from a dragged truth
+    argv = ["quad-sindy", "compare", "--model", str(path), "--out", str(tmp_path / "drag")]
+    monkeypatch.setattr(sys, "argv", [*argv, *param, "--effects", "drag"])
+    with pytest.raises(SystemExit) as code:
+        cli.main()
+    out, _ = capsys.readouterr()
+    assert code.value.code == 0 and "parted by > 0.001: at t = " in out, out
 
 
 def test_the_learning_curve_counts_the_steps_taken():

@@ -61,14 +61,17 @@ def compare_envs(
     steps: int = 1000,
     tolerance: float = 1e-3,
     env_kwargs: dict[str, Any] | None = None,
+    truth_kwargs: dict[str, Any] | None = None,
 ) -> EnvComparison:
     """Flies a policy in ``env_id`` and in the surrogate of ``model`` from the same start.
 
     ``make_policy`` is called once per env, so a stochastic policy draws the same action
     noise in both (a shared policy object would continue its random stream instead).
+    ``env_kwargs`` go to both envs, ``truth_kwargs`` to the ground truth only (its
+    ``effects``: a model identified on drag data holds the drag itself).
     """
     kwargs = {"trajectory": trajectory, **(env_kwargs or {})}
-    truth_env = gym.make(env_id, **kwargs)
+    truth_env = gym.make(env_id, **kwargs, **(truth_kwargs or {}))
     surrogate_env = gym.wrappers.TimeLimit(
         make_surrogate(model, env_id, **kwargs), truth_env.spec.max_episode_steps
     )
