@@ -292,9 +292,13 @@ def flights(
     out.mkdir(parents=True, exist_ok=True)
     for k, tr in enumerate(trajs):
         write_trajectory_csv(out / f"flight_{k}.csv", tr)
+    tilts = [j for j, n in enumerate(trajs[0].state_names) if n in ("phi", "theta")]
+    flown = max(float(abs(tr.x[:, tilts]).max()) for tr in trajs)
     typer.echo(
         f"wrote {len(trajs)} flights of {steps} rows to {out}/ (identify them with: "
-        f"quad-sindy identify {out}/flight_*.csv --out model.json)"
+        f"quad-sindy identify {out}/flight_*.csv --out model.json); largest tilt flown "
+        f"{flown:.2f} rad (--tilt {tilt:g} sets the references' amplitude, the controller's "
+        "tracking the tilt)"
     )
 
 

@@ -267,10 +267,14 @@ def test_flights_of_another_vehicle_identify_to_the_exact_model(monkeypatch, cap
     from identification.model import load_model
 
     out = tmp_path / "f"
-    code, _, _ = run_cli(monkeypatch, capsys, "flights", "--param", "mass=1.3", "--param",
-                         "Ixx=0.02", "--param", "rotor_force_max=12", "--steps", "600",
-                         "--out", str(out))  # fmt: skip
+    code, said, _ = run_cli(monkeypatch, capsys, "flights", "--param", "mass=1.3", "--param",
+                            "Ixx=0.02", "--param", "rotor_force_max=12", "--steps", "600",
+                            "--out", str(out))  # fmt: skip
     assert code in (0, None) and len(list(out.glob("flight_*.csv"))) == 3
+    from identification.data import read_log
+
+    flown = max(abs(tr.x[:, 2]).max() for f in out.glob("*.csv") for tr in read_log(f)[0])
+    assert f"largest tilt flown {flown:.2f} rad (--tilt 0.2 sets" in said  # not the option
     code, _, _ = run_cli(monkeypatch, capsys, "identify", *map(str, sorted(out.glob("*.csv"))),
                          "--out", str(tmp_path / "m.json"))  # fmt: skip
     model = load_model(tmp_path / "m.json")
