@@ -496,6 +496,12 @@ def identify(
                 trajs, cleaning = load_data(*as_preset, angles=declared, measured=first.measured,
                                             time_unit=unit, angle_unit=turn)  # fmt: skip
                 first = trajs[0]
+            else:  # the default spec: states named as angles enter through sin and cos
+                declared = [n for n in first.state_names if _looks_like_angle(n)]
+                if declared:  # (a trial's rotor-thrust log: phi^2 and f1 phi, 1.9 % at 1 s)
+                    trajs, cleaning = load_data(*read, angles=declared, measured=first.measured,
+                                                time_unit=unit, angle_unit=turn)  # fmt: skip
+                    first = trajs[0]
         if cleaning.changed:
             typer.echo(f"data: {cleaning.summary()}")
         if input_shift:
@@ -544,9 +550,11 @@ def identify(
             if library is None and preset is None:
                 trig = (
                     f", sin and cos of {', '.join(declared)} alone and times each variable"
+                    + ("" if angles is not None else " (angles by their names; --angles "
+                       "names others)")
                     if declared
                     else ""
-                )
+                )  # fmt: skip
                 library_note = (
                     f"library: polynomials of degree 2{trig} ({len(lib)} terms; --library "
                     "chooses another)"
