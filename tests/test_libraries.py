@@ -293,6 +293,18 @@ def motor_speed_rhs(state: np.ndarray, speeds: np.ndarray) -> np.ndarray:
     ])  # fmt: skip
 
 
+def rk4_substeps(rhs, state: np.ndarray, u: np.ndarray, dt: float, n: int = 10) -> np.ndarray:
+    """The test's own integrator: ``n`` classical RK4 substeps over one sample, input held."""
+    h = dt / n
+    for _ in range(n):
+        k1 = rhs(state, u)
+        k2 = rhs(state + h / 2 * k1, u)
+        k3 = rhs(state + h / 2 * k2, u)
+        k4 = rhs(state + h * k3, u)
+        state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return state
+
+
 def motor_speed_flight(seed: int, rows: int = 600, dt: float = 0.01) -> Trajectory:
     """Own simulator: PD position and attitude control, random thrust excitation, speeds
     held over each step, RK4 with 10 substeps."""
@@ -313,13 +325,7 @@ def motor_speed_flight(seed: int, rows: int = 600, dt: float = 0.01) -> Trajecto
         moment = IXX * (60.0 * (phi_ref - phi) - 14.0 * phi_dot)
         thrusts = thrust_total / 2 + np.array([-1, 1]) * moment / (2 * ARM) + excitation
         speeds = np.sqrt(np.clip(thrusts, 0.05 * hover, None) / K_THRUST)
-        h = dt / 10
-        for _ in range(10):
-            k1 = motor_speed_rhs(state, speeds)
-            k2 = motor_speed_rhs(state + h / 2 * k1, speeds)
-            k3 = motor_speed_rhs(state + h / 2 * k2, speeds)
-            k4 = motor_speed_rhs(state + h * k3, speeds)
-            state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        state = rk4_substeps(motor_speed_rhs, state, speeds, dt)
         states.append(state)
         inputs.append(speeds)
     inputs.append(inputs[-1])  # the last row's input acts over no step
@@ -391,13 +397,7 @@ def quaternion_flight(seed: int, rows: int = 600, dt: float = 0.01) -> Trajector
         moments = QJ * (36 * (target - attitude) - 10 * state[7:]) + rng.normal(0, 1.5, 3) * QJ
         thrust = QM * (G - 2 * state[2]) * (1 + rng.normal(0, 0.05))
         u = np.concatenate([[thrust], moments])
-        h = dt / 10
-        for _ in range(10):
-            k1 = quaternion_rhs(state, u)
-            k2 = quaternion_rhs(state + h / 2 * k1, u)
-            k3 = quaternion_rhs(state + h / 2 * k2, u)
-            k4 = quaternion_rhs(state + h * k3, u)
-            state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        state = rk4_substeps(quaternion_rhs, state, u, dt)
         states.append(state)
         inputs.append(u)
     inputs.append(inputs[-1])
