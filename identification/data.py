@@ -1007,7 +1007,7 @@ def _read_table(
                            auto=auto)  # fmt: skip
         names = list(table)
         if not names or not len(table[names[0]]):
-            raise ValueError(f"{path} has no rows of numeric columns")
+            raise ShortLog(f"{path} has no rows of numeric columns")
         if columns is not None:
             if len(columns) != len(names):
                 raise ValueError(f"{path} has {len(names)} numeric columns but {len(columns)} "
@@ -1019,7 +1019,7 @@ def _read_table(
         names = list(table)
     data = np.column_stack(list(table.values())) if names else np.zeros((0, 0))
     if not len(data):
-        raise ValueError(f"{path} has a header but no rows")
+        raise ShortLog(f"{path} has a header but no rows")
     st, inp = resolve_names(names, system, states, inputs, time)
     if notes is not None and system is not None and states is None and inputs is None:
         other = [c for c in names if c not in {*st, *inp, time} and not _ignored(c)]
@@ -1071,7 +1071,7 @@ def _read_csv_columns(
                               parse_options=pcsv.ParseOptions(delimiter=delimiter))  # fmt: skip
     except (OSError, pa.ArrowInvalid) as exc:
         if "Could not skip initial" in str(exc):  # a header and no line after it
-            raise ValueError(f"{path} has a header but no rows") from None
+            raise ShortLog(f"{path} has a header but no rows") from None
         raise ValueError(f"{path}: not a numeric CSV ({exc})") from None
     out = _float_columns(table, path, wanted, time, time_unit, notes, auto)
     return {("_" if c.startswith("_") and c[1:].isdigit() else c): v for c, v in out.items()}
@@ -1469,11 +1469,12 @@ def load_data(
     if short and not trajs:
         path, message = short[0]
         more = f" (and so do the {len(short) - 1} other file(s))" if len(short) > 1 else ""
-        raise ShortLog(f"{path}: {message}{more}")
+        raise ShortLog(f"{message if path in message else f'{path}: {message}'}{more}")
     if short:
         names = ", ".join(Path(p).name for p, _ in short[:3]) + (" ..." if len(short) > 3 else "")
+        first = short[0][1].removeprefix(f"{short[0][0]} ").split(" (")[0]
         report.notes = [*report.notes, f"left out {len(short)} file(s) with no segment long "
-                        f"enough to fit ({names}): {short[0][1].split(' (')[0]}"]  # fmt: skip
+                        f"enough to fit ({names}; the first: {first})"]  # fmt: skip
     return trajs, report
 
 

@@ -475,7 +475,15 @@ def test_load_data_leaves_out_a_short_file_and_names_one_that_logs_other_variabl
              for k in range(2)]  # fmt: skip
     trajs, report = load_data([short[0], good, short[1]], system="planar")
     assert len(trajs) == 1 and np.array_equal(trajs[0].x, other_clean[0].x)
-    assert "left out 2 file(s) with no segment long enough to fit (short0.csv, short1.csv)" in (
+    said = report.summary()
+    assert (
+        "left out 2 file(s) with no segment long enough to fit (short0.csv, short1.csv; the "
+        "first: no segment of at least 20 clean rows)" in said
+    ), said
+    empty = tmp_path / "empty.csv"
+    empty.write_text(open(good).readline())  # a header and no rows: left out too
+    trajs, report = load_data([good, str(empty)], system="planar")
+    assert len(trajs) == 1 and "(empty.csv; the first: has a header but no rows)" in (
         report.summary()
     )
     with pytest.raises(ValueError, match=r"short0\.csv: no segment of at least 20 .*the 1 other"):
