@@ -591,7 +591,7 @@ def select_model(
     misfit = misfit_note(used, names, base.derivative, xi, outliers=named)
     if misfit:
         report.warnings.append(misfit)
-    disagree = disagreement_note(used, names, best.window, xi, ratio)
+    disagree = disagreement_note(used, names, best.window, xi)
     if disagree:
         report.warnings.append(disagree)
     report.final_terms = int(np.count_nonzero(xi))

@@ -923,14 +923,20 @@ def compare(
     param: ParamOption = None,
     effects: Annotated[
         str | None,
-        typer.Option(help="effects of the ground truth only, e.g. drag or drag,wind or all"),
+        typer.Option(
+            help="effects of the ground truth only, e.g. drag or drag,wind or all (the env's "
+            "coefficients: --param drag_linear_xy=... ; flights --drag c is drag_linear_xy="
+            "drag_linear_z=c, drag_quadratic_xy=drag_quadratic_z=0)"
+        ),
     ] = None,
 ) -> None:
     """The same policy and initial state in the ground truth and in the surrogate.
 
     Both fly the env's vehicle (``--vehicle``, ``--param``; the paper vehicle by default):
     set it to the vehicle the model was identified on. ``--effects`` switches the ground
-    truth's effects on (a model identified on drag data holds the drag itself).
+    truth's effects on (a model identified on drag data holds the drag itself) with the
+    env's coefficients, which ``--param`` sets: the linear drag ``c`` of ``flights --drag``
+    is ``drag_linear_xy = drag_linear_z = c`` and no quadratic drag.
     """
     import numpy as np
 
