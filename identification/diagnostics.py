@@ -217,7 +217,7 @@ def disagreement_note(
     """
     from scipy.stats import chi2
 
-    from identification.support import least_squares, long_run_ratio
+    from identification.support import long_run_ratio, refit_support
 
     if len(trajs) < 2 or not np.any(xi):
         return None
@@ -227,17 +227,13 @@ def disagreement_note(
     for tr, g in zip(trajs, parts, strict=True):
         if g.rows < max(5 * max(len(s) for s in supports), MIN_UNIT_ROWS):
             continue
-        own = np.zeros_like(xi)
-        for i, support in enumerate(supports):
-            own[i, support] = least_squares(g.r, g.z[:, i], support)[1]
+        own = np.array([refit_support(g, i, support) for i, support in enumerate(supports)])
         ratio = np.maximum(long_run_ratio([tr], list(names), own, window), 1.0)
         per = []
         for i, support in enumerate(supports):
-            rss = least_squares(g.r, g.z[:, i], support)[0]
-            total = float(np.linalg.norm(g.r_aug[:, g.p + i]) ** 2)
-            outside = max(total - float(g.z[:, i] @ g.z[:, i]), 0.0)
-            sigma2 = (rss + outside) / max(g.rows - len(support), 1) * float(ratio[i])
+            sigma2 = residual_variance(g, i, support)[1] * float(ratio[i])
             normal = g.r[:, support].T @ g.r[:, support]
+            total = float(np.linalg.norm(g.r_aug[:, g.p + i]) ** 2)
             per.append((own[i, support], normal / max(sigma2, 1e-300), normal, total))
         fits.append(per)
     if len(fits) < 2:

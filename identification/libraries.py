@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pysindy as ps
 
-from identification.features import Term, parse_term, term_name
+from identification.features import Factor, Term, parse_term, term_name
 
 
 def paper_planar_library(include_duplicate: bool = True) -> ps.GeneralizedLibrary:
@@ -345,8 +345,12 @@ def _holds(term: Term, part: Term) -> bool:
     """
     if not part:
         return not term
-    have = {(f.var, f.kind, f.k if f.kind != "pow" else 0): f.k for f in term}
-    return all(have.get((f.var, f.kind, f.k if f.kind != "pow" else 0), 0) >= f.k for f in part)
+
+    def key(f: Factor) -> tuple[str, str, int]:  # a power's degree is compared, not matched
+        return f.var, f.kind, 0 if f.kind == "pow" else f.k
+
+    have = {key(f): f.k for f in term}
+    return all(have.get(key(f), 0) >= f.k for f in part)
 
 
 def _parse_spec_text(text: str) -> dict[str, object]:
