@@ -735,7 +735,8 @@ def _empty_model_message(candidates: Sequence[Candidate], hold: float) -> str:
         "the identified model has no term: no model with terms predicts the held-out data "
         f"significantly better than holding the state (best with terms: {terms}, "
         f"score {top.mean:.3g}{against}); the library may not contain the dynamics, or the "
-        "inputs do not explain the states (lagged, mislabelled or closed-loop inputs)"
+        "inputs do not explain the states (lagged, mislabelled or closed-loop inputs, or "
+        "commands the actuators did not follow: log the applied inputs)"
     )
 
 
