@@ -576,35 +576,45 @@ def angle_offset_note(
     agree on that shift up to quarter turns (the physics' phases), by at most
     :data:`OFFSET_LIMIT`, the angle is named with it: an offset, or an axis tilted by it.
     """
-    found: dict[tuple[str, str], list[tuple[str, float]]] = {}
+    found: dict[str, list[tuple[str, str, float]]] = {}
     for i, state in enumerate(state_names):
         pairs: dict[tuple[str, str], dict[str, float]] = {}
         for j in np.flatnonzero(xi[i]):
             term = parse_term(names[j])
-            trig = [f for f in term if f.kind in ("sin", "cos") and f.k == 1]
-            if len(trig) != 1 or sum(f.var == trig[0].var for f in term) != 1:
-                continue
-            rest = term_name(tuple(f for f in term if f is not trig[0]))
-            pairs.setdefault((trig[0].var, rest), {})[trig[0].kind] = float(xi[i, j])
-        for key, both in pairs.items():
+            for trig in term:  # each angle's one sine or cosine in it (other angles' kept)
+                if trig.kind not in ("sin", "cos") or trig.k != 1:
+                    continue
+                if sum(f.var == trig.var for f in term) != 1:
+                    continue
+                rest = term_name(tuple(f for f in term if f is not trig))
+                pairs.setdefault((trig.var, rest), {})[trig.kind] = float(xi[i, j])
+        for (angle, rest), both in pairs.items():
             if len(both) == 2:
                 turn = -np.arctan2(both["cos"], both["sin"])
                 shift = (turn + np.pi / 4) % (np.pi / 2) - np.pi / 4
-                found.setdefault(key, []).append((state, float(shift)))
-    for (angle, factor), seen in found.items():
-        shifts = np.array([b for _, b in seen])
+                found.setdefault(angle, []).append((state, rest, float(shift)))
+    # One angle's pairs, whatever their factors: in 6-DOF each equation rotates another
+    # factor (`sin(psi) cos(theta) u1` in vx', `cos(theta) u1` in vz'), and a trial's 0.01 rad
+    # offset of phi, one pair per equation, went unnamed while grouped by factor.
+    for angle, seen in found.items():
+        shifts = np.array([b for _, _, b in seen])
         small = np.abs(shifts)
         if len(seen) < 2 or not (1e-4 < small.min() and small.max() < OFFSET_LIMIT):
             continue
         if np.ptp(shifts) > max(0.1 * np.abs(shifts).min(), 1e-4):
             continue
         offset = float(np.mean(shifts))
-        where = " and ".join(f"{state}'" for state, _ in seen)
+        where = list(dict.fromkeys(f"{state}'" for state, _, _ in seen))
+        factors = list(dict.fromkeys(rest for _, rest, _ in seen))
+        held = (f"{' and '.join(where)} hold sin({angle}) {factors[0]} and cos({angle}) "
+                f"{factors[0]}" if len(factors) == 1 else
+                f"{', '.join(where)} each hold sin({angle}) X and cos({angle}) X (X: "
+                f"{', '.join(factors)})")  # fmt: skip
         return (
-            f"{where} hold sin({angle}) {factor} and cos({angle}) {factor} together as one "
-            f"sine shifted by {offset:.4g} rad: the logged {angle} may be offset by "
-            f"{offset:.4g} rad (an IMU's mounting, an estimator's bias; subtract it and "
-            f"identify again), or the vehicle's axis is tilted by it"
+            f"{held} together as one sine shifted by {offset:.4g} rad: the "
+            f"logged {angle} may be offset by {offset:.4g} rad (an IMU's mounting, an "
+            f"estimator's bias; subtract it and identify again), or the vehicle's axis is "
+            f"tilted by it"
         )
     return None
 

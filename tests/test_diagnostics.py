@@ -13,6 +13,7 @@ from identification.data import (
     load_data,
     write_trajectory_csv,
 )
+from identification.diagnostics import angle_offset_note
 from identification.experiments.synthetic import (
     OTHER_PLANAR,
     FlightSpec,
@@ -398,6 +399,27 @@ def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inpu
              for i, t in enumerate(other_clean)]  # fmt: skip
     shown = CliRunner().invoke(app, ["score", str(tmp_path / "m.json"), *paths])
     assert shown.exit_code == 0 and "inputs taken" not in shown.output, shown.output
+
+
+def test_an_angle_offset_is_named_across_equations_that_rotate_different_factors():
+    """In 6-DOF each equation rotates another factor by the offset (a trial's Z-X-Y quad with
+    phi logged 0.01 rad off: `sin(psi) cos(theta) u1` in vx', `cos(theta) u1` in vz', each
+    held with both sin(phi) and cos(phi)); grouped by factor, no group had two equations and
+    nothing was named. Logged phi = true phi + b: the model holds sin(phi - b), expanded."""
+    b = 0.01
+    names = ["sin(phi) sin(psi) cos(theta) u1", "cos(phi) sin(psi) cos(theta) u1",
+             "cos(phi) cos(theta) u1", "sin(phi) cos(theta) u1", "1", "q"]  # fmt: skip
+    xi = np.zeros((3, len(names)))
+    xi[0, [0, 1]] = 0.77 * np.cos(b), -0.77 * np.sin(b)  # vx': 0.77 sin(phi - b) sin(psi) ...
+    xi[1, [2, 3, 4]] = 0.77 * np.cos(b), 0.77 * np.sin(b), -9.81  # vz': 0.77 cos(phi - b) ...
+    xi[2, 5] = 1.0  # theta' = q
+    note = angle_offset_note(xi, names, ["vx", "vz", "theta"])
+    assert note is not None and "the logged phi may be offset by 0.01 rad" in note, note
+    assert "vx', vz' each hold" in note and "cos(theta) u1" in note
+    xi[1, 3] *= 3  # the shifts disagree: no common offset
+    assert angle_offset_note(xi, names, ["vx", "vz", "theta"]) is None
+    xi[1, 3] = 0.0  # one pair alone: a term of the dynamics may hold both
+    assert angle_offset_note(xi, names, ["vx", "vz", "theta"]) is None
 
 
 def test_an_angle_logged_with_an_offset_is_named_with_it(other_clean):
