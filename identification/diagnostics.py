@@ -606,15 +606,73 @@ def angle_offset_note(
         offset = float(np.mean(shifts))
         where = list(dict.fromkeys(f"{state}'" for state, _, _ in seen))
         factors = list(dict.fromkeys(rest for _, rest, _ in seen))
-        held = (f"{' and '.join(where)} hold sin({angle}) {factors[0]} and cos({angle}) "
+        verb = "hold" if len(where) > 1 else "holds"
+        held = (f"{' and '.join(where)} {verb} sin({angle}) {factors[0]} and cos({angle}) "
                 f"{factors[0]}" if len(factors) == 1 else
-                f"{', '.join(where)} each hold sin({angle}) X and cos({angle}) X (X: "
-                f"{', '.join(factors)})")  # fmt: skip
+                f"{', '.join(where)} {verb} sin({angle}) X and cos({angle}) X for each X of "
+                f"{', '.join(factors)}")  # fmt: skip
         return (
             f"{held} together as one sine shifted by {offset:.4g} rad: the "
             f"logged {angle} may be offset by {offset:.4g} rad (an IMU's mounting, an "
             f"estimator's bias; subtract it and identify again), or the vehicle's axis is "
             f"tilted by it"
+        )
+    return None
+
+
+BIAS_FLOOR = 1e-3
+"""A state's constant bias is named only above this share of its standard deviation."""
+
+KINEMATIC_TOL = 0.02
+"""A term ``R v`` with a coefficient within this of +-1 reads as a kinematic relation."""
+
+
+def state_bias_note(
+    xi: np.ndarray, names: Sequence[str], state_names: Sequence[str], spread: np.ndarray
+) -> str | None:
+    """A note where the model holds a state ``v`` only as ``v - b``: a logged bias of ``v``.
+
+    A rate gyro that reads p + b turns every ``R p`` of the dynamics into ``R p - b R``: a
+    trial's 0.01 rad/s gave ``phi' = phi_dot - 0.01`` (planar) and, in 6-DOF, ``-0.01
+    cos(theta)`` beside ``p cos(theta)`` in phi', ``-0.01 tan(phi) sin(theta)`` in theta'
+    and ``-0.008571 r`` beside ``0.8571 p r`` in q', with no note (2 % of the range off at
+    1 s on flights without the bias). For each pair ``c1 R v``, ``c0 R`` in one equation
+    the bias is ``b = -c0 / c1``; where every pair of a state agrees on it (within 10 %),
+    one of them is a kinematic relation (``c1`` within :data:`KINEMATIC_TOL` of +-1, as
+    ``phi' = phi_dot``: a drag term ``-k v`` beside a wind constant is not) and ``|b|``
+    exceeds :data:`BIAS_FLOOR` of the state's spread, the state is named with ``b``.
+
+    Args:
+        xi: Coefficients (states x features).
+        names: Feature names.
+        state_names: State names.
+        spread: Each state's standard deviation on the data.
+    """
+    for k, v in enumerate(state_names):
+        found: list[tuple[str, float, float]] = []
+        for i, state in enumerate(state_names):
+            terms = {parse_term(names[j]): float(xi[i, j]) for j in np.flatnonzero(xi[i])}
+            for term, c1 in terms.items():
+                if sum(f.var == v for f in term) != 1 or (v, "pow", 1) not in [
+                    (f.var, f.kind, f.k) for f in term
+                ]:
+                    continue
+                rest = tuple(f for f in term if f.var != v)
+                if rest in terms:
+                    found.append((state, c1, -terms[rest] / c1))
+        if not found or not any(abs(abs(c1) - 1) < KINEMATIC_TOL for _, c1, _ in found):
+            continue
+        biases = np.array([b for _, _, b in found])
+        bias = float(np.mean(biases))
+        if abs(bias) <= BIAS_FLOOR * float(spread[k]) or np.ptp(biases) > 0.1 * abs(bias):
+            continue
+        where = list(dict.fromkeys(f"{state}'" for state, _, _ in found))
+        held = f"{v} - {bias:.4g}" if bias > 0 else f"{v} + {-bias:.4g}"
+        return (
+            f"{', '.join(where)} {'hold' if len(where) > 1 else 'holds'} {v} only as {held}: "
+            f"the logged {v} may carry a constant "
+            f"bias of {bias:.4g} (a rate gyro's or an estimator's; subtract it and identify "
+            "again), and the model is right only for logs with it"
         )
     return None
 

@@ -82,6 +82,7 @@ from identification.diagnostics import (
     outlier_note,
     outlying_steps,
     stamp_jitter,
+    state_bias_note,
     state_shift_note,
 )
 from identification.features import compile_rhs, parse_term, term_name
@@ -570,6 +571,10 @@ def select_model(
     shifted = shifted or angle_offset_note(xi, names, first.state_names)
     if shifted:  # before the notes it causes (outlying steps, misfit)
         report.warnings.append(shifted)
+    spread = np.concatenate([t.x for t in used]).std(axis=0)
+    biased = state_bias_note(xi, names, first.state_names, spread)
+    if biased:
+        report.warnings.append(biased)
     if base.derivative in ("rk4", "forward"):
         # The returned model's own residuals: sparse, it cannot bend to bad steps as a fit of
         # the whole library does (4 % of the steps with a wrong input hid from such a fit).

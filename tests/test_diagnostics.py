@@ -13,7 +13,7 @@ from identification.data import (
     load_data,
     write_trajectory_csv,
 )
-from identification.diagnostics import angle_offset_note
+from identification.diagnostics import angle_offset_note, state_bias_note
 from identification.experiments.synthetic import (
     OTHER_PLANAR,
     FlightSpec,
@@ -415,11 +415,44 @@ def test_an_angle_offset_is_named_across_equations_that_rotate_different_factors
     xi[2, 5] = 1.0  # theta' = q
     note = angle_offset_note(xi, names, ["vx", "vz", "theta"])
     assert note is not None and "the logged phi may be offset by 0.01 rad" in note, note
-    assert "vx', vz' each hold" in note and "cos(theta) u1" in note
+    assert "vx', vz' hold sin(phi) X and cos(phi) X for each X of" in note
+    assert "cos(theta) u1" in note
     xi[1, 3] *= 3  # the shifts disagree: no common offset
     assert angle_offset_note(xi, names, ["vx", "vz", "theta"]) is None
     xi[1, 3] = 0.0  # one pair alone: a term of the dynamics may hold both
     assert angle_offset_note(xi, names, ["vx", "vz", "theta"]) is None
+
+
+def test_a_rate_logged_with_a_bias_is_named_with_it(other_clean):
+    """A rate gyro reading 0.01 rad/s high: the model holds `phi' = phi_dot - 0.01`, exact
+    for those logs and 1.5 % off at 1 s on flights without the bias, and a trial got no
+    note. The bias is named; unbiased flights get no such note."""
+    biased = [Trajectory(t.t, t.x + [0, 0, 0, 0, 0, 0.01], t.u, PS, PI) for t in other_clean]
+    _, report = select_model(biased, planar_library(), **FAST)
+    named = [w for w in report.warnings if "constant bias" in w]
+    assert len(named) == 1 and "phi' holds phi_dot only as phi_dot - 0.01:" in named[0], named
+    _, report = select_model(other_clean, planar_library(), **FAST)
+    assert not any("constant bias" in w for w in report.warnings), report.warnings
+
+
+def test_a_bias_is_read_from_every_equation_that_holds_the_state():
+    """6-DOF: p + b enters the kinematics (`p cos(theta)` beside `cos(theta)`) and the
+    gyroscopic terms (`p r` beside `r` in q'); all must agree. A drag term beside a wind
+    constant (`-0.4 vx + 0.2`) is not a kinematic relation and is not read as a bias."""
+    b = 0.01
+    names = ["p cos(theta)", "cos(theta)", "p r", "r", "vx", "1"]
+    states = ["phi", "q", "vx", "p"]
+    xi = np.zeros((4, len(names)))
+    xi[0, [0, 1]] = 1.0, -b  # phi' = cos(theta) (p - b)
+    xi[1, [2, 3]] = 0.857, -0.857 * b  # q' = 0.857 (p - b) r
+    xi[2, [4, 5]] = -0.4, 0.2  # vx' = -0.4 (vx - 0.5): drag and wind
+    spread = np.ones(4)
+    note = state_bias_note(xi, names, states, spread)
+    assert note is not None and note.startswith("phi', q' hold p only as p - 0.01:"), note
+    xi[1, 3] *= 2  # the equations disagree on the bias
+    assert state_bias_note(xi, names, states, spread) is None
+    xi[1, 3] /= 2
+    assert state_bias_note(xi, names, states, spread * 100) is None  # under 1e-3 of p's spread
 
 
 def test_an_angle_logged_with_an_offset_is_named_with_it(other_clean):
