@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from identification.data import Trajectory, clock_line
-from identification.features import parse_term, term_name
+from identification.features import compile_features, parse_term, term_name
 from identification.fit import (
     Gram,
     grams,
@@ -675,6 +675,64 @@ def state_bias_note(
             "again), and the model is right only for logs with it"
         )
     return None
+
+
+KINEMATIC_INPUT_SHARE = 3e-3
+"""An input's share of a kinematic relation's rhs (standard deviations) that is named."""
+
+
+def kinematic_input_note(
+    trajs: Sequence[Trajectory], names: Sequence[str], xi: np.ndarray
+) -> str | None:
+    """A note where an input enters an equation that is a kinematic relation.
+
+    ``phi' = phi_dot`` (or ``phi' = p cos(theta) + r sin(theta)``: one state times functions
+    of the angles, coefficient +-1) takes no input. Where the fit adds one (a trial's
+    ``phi' = phi_dot + 0.0918 u2``), the input that acted over a step is not the logged one:
+    a controller faster than the log, whose logged input is a sample of a command that
+    changed within the step (the trial's 500 Hz controller logged at 100 Hz: 30 % of the
+    range off at 1 s, with notes that pointed elsewhere), or an input logged late. Named
+    where the input terms carry more than :data:`KINEMATIC_INPUT_SHARE` of the equation's
+    rhs on the data (0.02 to 0.04 on the trial's sampled inputs, 0.005 to 0.008 on most of
+    its logs of the latest command; state noise correlated in time put up to 0.0013 there).
+    The angles are the variables the library takes trig functions of.
+    """
+    states, inputs = trajs[0].state_names, trajs[0].input_names
+    trig = ("sin", "cos", "tan", "sec")
+    angles = {f.var for n in names for f in parse_term(n) if f.kind in trig}
+    unknown = set(states) - set(angles)
+    x = np.concatenate([t.x for t in trajs])
+    u = np.concatenate([t.u for t in trajs])
+    theta = None
+    where: list[str] = []
+    for i, state in enumerate(states):
+        cols = np.flatnonzero(xi[i])
+        terms = [parse_term(names[j]) for j in cols]
+        kinematic = any(
+            abs(abs(xi[i, j]) - 1) < KINEMATIC_TOL
+            and sum(f.var in unknown and f.kind == "pow" and f.k == 1 for f in term) == 1
+            and all(f.var in angles for f in term if not (f.var in unknown and f.kind == "pow"))
+            for j, term in zip(cols, terms, strict=True)
+        )
+        driven = [j for j, t in zip(cols, terms, strict=True) if any(f.var in inputs for f in t)]
+        if not (kinematic and driven):
+            continue
+        if theta is None:
+            with np.errstate(all="ignore"):
+                theta = compile_features(names, states, inputs)(x, u)
+        whole = float(np.std(theta[:, cols] @ xi[i, cols]))
+        share = float(np.std(theta[:, driven] @ xi[i, driven])) / max(whole, 1e-300)
+        if share > KINEMATIC_INPUT_SHARE:
+            terms_text = ", ".join(names[j] for j in driven)
+            where.append(f"{state}' ({terms_text}: {share:.1%} of its rhs)")
+    if not where:
+        return None
+    return (
+        f"an input in a kinematic relation (a state's derivative that is another state, as "
+        f"phi' = phi_dot): {'; '.join(where)}. The input that acted over each step is not the "
+        "one logged: a controller faster than the log (log the command held over each step, "
+        "or log at the control rate), or an input logged late (--input-shift)"
+    )
 
 
 STAMP_JITTER = 1e-3

@@ -78,6 +78,7 @@ from identification.diagnostics import (
     data_warnings,
     disagreement_note,
     input_shift_note,
+    kinematic_input_note,
     misfit_note,
     outlier_note,
     outlying_steps,
@@ -575,6 +576,9 @@ def select_model(
     biased = state_bias_note(xi, names, first.state_names, spread)
     if biased:
         report.warnings.append(biased)
+    driven = kinematic_input_note(used, names, xi)
+    if driven:
+        report.warnings.append(driven)
     if base.derivative in ("rk4", "forward"):
         # The returned model's own residuals: sparse, it cannot bend to bad steps as a fit of
         # the whole library does (4 % of the steps with a wrong input hid from such a fit).

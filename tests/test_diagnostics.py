@@ -423,6 +423,52 @@ def test_an_angle_offset_is_named_across_equations_that_rotate_different_factors
     assert angle_offset_note(xi, names, ["vx", "vz", "theta"]) is None
 
 
+def _fast_controller_flights(sub: int, rows: int = 800, m: float = 0.7, ixx: float = 6e-3):
+    """Planar flights (this test's own RK4 and PD, no project code) whose controller and
+    dither run ``sub`` times per logged row; each row logs the command of that instant."""
+
+    def rhs(x, u):
+        return np.array([x[3], x[4], x[5], -u[0] * np.sin(x[2]) / m,
+                         u[0] * np.cos(x[2]) / m - 9.81, u[1] / ixx])  # fmt: skip
+
+    out = []
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        x, h, goal = np.zeros(6), 0.01 / sub, np.zeros(2)
+        ts, xs, us = [], [], []
+        for k in range(rows * sub):
+            if k % (150 * sub) == 0:
+                goal = rng.uniform(-1, 1, 2)
+            ay, az = 3 * (goal - x[:2]) - 2.8 * x[3:5]
+            phic = np.clip(-np.arctan2(ay, 9.81 + az), -0.3, 0.3)
+            thrust = m * (9.81 + az) / np.cos(x[2]) * (1 + 0.05 * rng.standard_normal())
+            u = np.array([thrust, ixx * (300 * (phic - x[2]) - 30 * x[5] + 15 * rng.normal())])
+            if k % sub == 0:
+                ts.append(k * h)
+                xs.append(x.copy())
+                us.append(u)
+            k1 = rhs(x, u)
+            k2 = rhs(x + h / 2 * k1, u)
+            k3 = rhs(x + h / 2 * k2, u)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + rhs(x + h * k3, u))
+        out.append(Trajectory(np.array(ts), np.array(xs), np.array(us), PS, PI))
+    return out
+
+
+def test_inputs_that_changed_within_the_logged_step_are_named():
+    """A 500 Hz controller logged at 100 Hz (each row the command of its instant): a trial got
+    `phi' = phi_dot + 0.09 u2` and a wrong phi_dot' (30 % off at 1 s) with notes that
+    pointed elsewhere. An input in the kinematic relation phi' = phi_dot is named; the same
+    controller run at the log's rate (inputs held over each row) gives the exact model and
+    no such note."""
+    _, report = select_model(_fast_controller_flights(5), planar_library(), **FAST)
+    named = [w for w in report.warnings if "an input in a kinematic relation" in w]
+    assert len(named) == 1 and "phi' (u2: " in named[0], report.warnings
+    model, report = select_model(_fast_controller_flights(1), planar_library(), **FAST)
+    assert model.n_terms == 7
+    assert not any("kinematic relation" in w for w in report.warnings), report.warnings
+
+
 def test_a_rate_logged_with_a_bias_is_named_with_it(other_clean):
     """A rate gyro reading 0.01 rad/s high: the model holds `phi' = phi_dot - 0.01`, exact
     for those logs and 1.5 % off at 1 s on flights without the bias, and a trial got no
