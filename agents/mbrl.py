@@ -32,7 +32,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.parallel import run_jobs
+from agents.parallel import ray_available, run_jobs
 from agents.policies import OrnsteinUhlenbeckPolicy, SB3Policy
 from agents.tasks import task_kwargs
 from agents.train import ALGOS, canonical, evaluate, make_algo, make_env, train
@@ -354,6 +354,8 @@ def run_experiment(
         raise ValueError("need at least one seed")
     if int(workers) != workers or workers < 1:
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    if workers > 1 and not ray_available():  # before anything is written
+        raise ValueError("parallel runs need Ray: pip install 'quad-sindy[ray]' (or --workers 1)")
     # the ground truth must be a quadrotor env taking the task: checked before config.json
     # is written (a failed start left a folder that refused the next, valid run)
     make_env(config.env_id, **config.truth_kwargs).close()

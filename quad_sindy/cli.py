@@ -710,7 +710,8 @@ def score(
         if shift:  # the logs are read as the model's training logs were
             trajs, dropped = _shifted(trajs, shift)
             when = "later" if shift > 0 else "earlier"
-            typer.echo(f"data: inputs taken {abs(shift)} row(s) {when}, as in training{dropped}")
+            source = "as in training" if input_shift is None else "as --input-shift asks"
+            typer.echo(f"data: inputs taken {abs(shift)} row(s) {when}, {source}{dropped}")
         periods = sorted(t.dt for t in trajs)
         if periods[-1] > 1.01 * periods[0]:  # one horizon in steps must be one in seconds
             _fail(f"the logs' sample steps differ ({periods[0]:g} s to {periods[-1]:g} s): "

@@ -24,7 +24,10 @@ for spec in args.tasks:
         parser.error(f"a task is ENV:TASK (PlanarQuad-v0:figure8), got {spec!r}")
     env_id, task = spec.split(":")
     folder = out / f"{env_id}_{task}"
-    result = run_experiment(MBRLConfig(env_id=env_id, task=task), folder, 5, workers)
+    try:
+        result = run_experiment(MBRLConfig(env_id=env_id, task=task), folder, 5, workers)
+    except ValueError as exc:  # bad settings: one line, no traceback
+        parser.exit(2, f"error: {exc}\n")
     summary = result["summary"]
     eff = summary["sample_efficiency"]
     print(

@@ -212,6 +212,10 @@ def test_experiment_checks_workers_and_disagreement_before_writing(tmp_path):
     with pytest.raises(ValueError, match="workers must be a positive integer"):
         run_experiment(TINY, tmp_path / "w", seeds=1, workers=0)
     assert not (tmp_path / "w").exists()
+    if not ray_available():  # parallel runs without Ray: refused before anything is written
+        with pytest.raises(ValueError, match="parallel runs need Ray"):
+            run_experiment(TINY, tmp_path / "r", seeds=1, workers=2)
+        assert not (tmp_path / "r").exists()
     for value in (float("nan"), float("inf"), -1.0):
         with pytest.raises(ValueError, match="disagreement must be a finite number"):
             dataclasses.replace(TINY, disagreement=value)
