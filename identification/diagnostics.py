@@ -92,10 +92,10 @@ def outlying_steps(
     The residual of each step (window 1) under ``xi`` (a fit of the whole library, or the
     selected model) is compared with the median of its 11 neighbours; a step stands out
     where that departure exceeds :data:`OUTLIER_Z` robust deviations (1.4826 times the
-    median absolute departure, or the 90th percentile over 1.645 where larger, per equation,
-    at least :data:`OUTLIER_FLOOR` of the target's spread). Smooth misfit (a missing drag
-    term) moves the neighbours too; an input that did not act as logged (a command that
-    saturated the rotors, a glitch) does not.
+    median absolute departure, per equation, at least :data:`OUTLIER_FLOOR` of the target's
+    spread and the state's quantisation noise, :func:`quantisation_noise`). Smooth misfit (a
+    missing drag term) moves the neighbours too; an input that did not act as logged (a
+    command that saturated the rotors, a glitch) does not.
 
     Returns:
         {trajectory index: (rows, states) mask}, rows in the order :func:`iter_rows` yields
@@ -119,18 +119,41 @@ def outlying_steps(
         stacked = np.concatenate(list(local.values()))
         if not np.all(np.isfinite(stacked)):
             return {}
-        floor = OUTLIER_FLOOR * np.concatenate(targets).std(axis=0)
-        # The 90th percentile over its Gaussian quantile is the same deviation for noise and
-        # for a few outliers; for residuals on a few levels (quantised states: a trial's 1 cm
-        # and 0.01 rad logs) the median departure is near zero, and 38 % of the steps stood
-        # "outside" it.
-        departure = np.abs(stacked)
-        typical = np.maximum(1.4826 * np.median(departure, axis=0),
-                             np.quantile(departure, 0.9, axis=0) / 1.6449)  # fmt: skip
-        deviation = np.maximum(typical, floor)
+        floor = np.maximum(OUTLIER_FLOOR * np.concatenate(targets).std(axis=0),
+                           quantisation_noise(trajs))  # fmt: skip
+        deviation = np.maximum(1.4826 * np.median(np.abs(stacked), axis=0), floor)
         deviation = np.where(deviation > 0, deviation, 1.0)
         flagged = {i: np.abs(v) / deviation > OUTLIER_Z for i, v in local.items()}
     return {i: f for i, f in flagged.items() if f.any()}
+
+
+def resolution(x: np.ndarray) -> float:
+    """The grid a logged signal lies on (an encoder's or a mocap's resolution), or 0.
+
+    The smallest non-zero change between rows, where every change is a whole number of it
+    (within 1 %) and at least 10 rows change.
+    """
+    d = np.abs(np.diff(np.asarray(x, dtype=float)))
+    moved = d[d > 0]
+    if moved.size < 10:
+        return 0.0
+    q = float(moved.min())
+    levels = moved / q
+    return q if np.all(np.abs(levels - np.round(levels)) < 0.01) else 0.0
+
+
+def quantisation_noise(trajs: Sequence[Trajectory]) -> np.ndarray:
+    """Each state's quantisation noise in its step-wise target ``dx / dt``, 0 where none.
+
+    A state on a grid q carries rounding noise uniform in +-q / 2 on each sample; the
+    difference of two over a step dt has deviation q / (dt sqrt(6)). A trial's 1 cm and
+    0.01 rad logs had 38 % of their steps named as outlying against a median departure that
+    the few levels of their residuals put near zero.
+    """
+    x = np.concatenate([t.x for t in trajs])
+    dt = float(np.median(np.concatenate([np.diff(t.t) for t in trajs])))
+    grid = np.array([resolution(col) for col in x.T])
+    return grid / (dt * np.sqrt(6.0))
 
 
 def _residuals(
