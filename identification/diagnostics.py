@@ -722,7 +722,8 @@ def kinematic_input_note(
     ``phi' = phi_dot + 0.0918 u2``), the input that acted over a step is not the logged one:
     a controller faster than the log, whose logged input is a sample of a command that
     changed within the step (the trial's 500 Hz controller logged at 100 Hz: 30 % of the
-    range off at 1 s, with notes that pointed elsewhere), or an input logged late. Named
+    range off at 1 s, with notes that pointed elsewhere; inputs logged a whole row late leave
+    the kinematics clean, and the trial's `--input-shift 1` made it worse). Named
     where the input terms carry more than :data:`KINEMATIC_INPUT_SHARE` of the equation's
     rhs on the data (0.02 to 0.04 on the trial's sampled inputs, 0.005 to 0.008 on most of
     its logs of the latest command; state noise correlated in time put up to 0.0013 there).
@@ -761,8 +762,9 @@ def kinematic_input_note(
     return (
         f"an input in a kinematic relation (a state's derivative that is another state, as "
         f"phi' = phi_dot): {'; '.join(where)}. The input that acted over each step is not the "
-        "one logged: a controller faster than the log (log the command held over each step, "
-        "or log at the control rate), or an input logged late (--input-shift)"
+        "one logged: a command that changed within the step, as from a controller faster than "
+        "the log (log the command held over each step, its mean over the step, or log at the "
+        "control rate; shifting the inputs by whole rows does not fix it)"
     )
 
 
