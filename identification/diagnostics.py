@@ -527,7 +527,8 @@ def outlier_note(
         f"{count} step(s) of {total} stand more than {OUTLIER_Z:g} robust deviations out of "
         f"their neighbours' residuals in {', '.join(w + chr(39) for w in where)} "
         f"(at t = {shown} s): inputs that did not act as logged (saturated actuators: log the "
-        "applied inputs), glitches, or abrupt effects the library lacks (gusts)"
+        "applied inputs; inputs measured with noise), glitches, or abrupt effects the library "
+        "lacks (gusts)"
     )
     if dropped:
         lost_note = f"; {lost} rows in pieces too short to keep" if lost else ""
@@ -730,8 +731,7 @@ def kinematic_input_note(
     The angles are the variables the library takes trig functions of.
     """
     states, inputs = trajs[0].state_names, trajs[0].input_names
-    trig = ("sin", "cos", "tan", "sec")
-    angles = {f.var for n in names for f in parse_term(n) if f.kind in trig}
+    angles = trig_variables(names)
     unknown = set(states) - set(angles)
     x = np.concatenate([t.x for t in trajs])
     u = np.concatenate([t.u for t in trajs])
