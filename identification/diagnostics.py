@@ -685,9 +685,8 @@ def state_bias_note(
         for i, state in enumerate(state_names):
             terms = {parse_term(names[j]): float(xi[i, j]) for j in np.flatnonzero(xi[i])}
             for term, c1 in terms.items():
-                if sum(f.var == v for f in term) != 1 or (v, "pow", 1) not in [
-                    (f.var, f.kind, f.k) for f in term
-                ]:
+                plain = [f for f in term if f.var == v]  # v itself, to the first power, once
+                if len(plain) != 1 or (plain[0].kind, plain[0].k) != ("pow", 1):
                     continue
                 rest = tuple(f for f in term if f.var != v)
                 if rest in terms:
@@ -702,9 +701,9 @@ def state_bias_note(
         held = f"{v} - {bias:.4g}" if bias > 0 else f"{v} + {-bias:.4g}"
         return (
             f"{', '.join(where)} {'hold' if len(where) > 1 else 'holds'} {v} only as {held}: "
-            f"the logged {v} may carry a constant "
-            f"bias of {bias:.4g} (a rate gyro's or an estimator's; subtract it and identify "
-            "again), and the model is right only for logs with it"
+            f"the logged {v} may carry a constant bias of {bias:.4g} (a rate gyro's or an "
+            "estimator's; subtract it and identify again), and the model is right only for "
+            "logs with it"
         )
     return None
 
@@ -735,7 +734,6 @@ def kinematic_input_note(
     unknown = set(states) - set(angles)
     x = np.concatenate([t.x for t in trajs])
     u = np.concatenate([t.u for t in trajs])
-    theta = None
     where: list[str] = []
     for i, state in enumerate(states):
         cols = np.flatnonzero(xi[i])
@@ -749,11 +747,11 @@ def kinematic_input_note(
         driven = [j for j, t in zip(cols, terms, strict=True) if any(f.var in inputs for f in t)]
         if not (kinematic and driven):
             continue
-        if theta is None:
-            with np.errstate(all="ignore"):
-                theta = compile_features(names, states, inputs)(x, u)
-        whole = float(np.std(theta[:, cols] @ xi[i, cols]))
-        share = float(np.std(theta[:, driven] @ xi[i, driven])) / max(whole, 1e-300)
+        with np.errstate(all="ignore"):  # this equation's terms only: memory of a few columns
+            theta = compile_features([names[j] for j in cols], states, inputs)(x, u)
+        mine = np.isin(cols, driven)
+        whole = float(np.std(theta @ xi[i, cols]))
+        share = float(np.std(theta[:, mine] @ xi[i, cols[mine]])) / max(whole, 1e-300)
         if share > KINEMATIC_INPUT_SHARE:
             terms_text = ", ".join(names[j] for j in driven)
             where.append(f"{state}' ({terms_text}: {share:.1%} of its rhs)")
