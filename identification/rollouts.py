@@ -10,6 +10,7 @@ angles unwrapped) and the commanded input.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -17,7 +18,7 @@ import gymnasium as gym
 import numpy as np
 
 import quad_envs  # noqa: F401 (registers the ids)
-from identification.data import Trajectory
+from identification.data import IdentificationWarning, Trajectory
 from quad_envs.trajectories import RandomWaypoints
 
 Policy = Callable[[np.ndarray, dict[str, Any]], np.ndarray]
@@ -74,7 +75,7 @@ def collect_rollouts(
         options = reset_options(ep, rng) if reset_options else None
         obs, info = env.reset(seed=seed + ep, options=options)
         ts, xs, us, commanded, refs = [], [], [], [], []
-        steps = 0
+        steps, terminated = 0, False
         while True:
             action = np.asarray(policy(obs, info), dtype=np.float64)
             if action_noise > 0:
@@ -92,7 +93,7 @@ def collect_rollouts(
                 break
         if len(us) >= 3:
             meta = {"env": env_id, "seed": seed + ep, "commanded": np.array(commanded),
-                    "record": record}  # fmt: skip
+                    "record": record, "terminated": bool(terminated)}  # fmt: skip
             x = np.array(xs)
             if measured:  # observations wrap the heading into [-pi, pi)
                 x[:, angles] = np.unwrap(x[:, angles], axis=0)
@@ -165,7 +166,7 @@ def excitation_rollouts(
         return {"trajectory": ref}
 
     try:
-        return collect_rollouts(
+        trajs = collect_rollouts(
             env_id,
             lambda obs, info: to_action(pd(info["state"], info["reference"])),
             episodes=episodes,
@@ -178,3 +179,13 @@ def excitation_rollouts(
         )
     finally:
         probe.close()
+    fell = [f"seed {t.meta['seed']} after {len(t)} rows" for t in trajs if t.meta["terminated"]]
+    if fell:  # short flights are data too, but the controller lost the vehicle there
+        warnings.warn(
+            f"{len(fell)} of {episodes} flight(s) ended early, the vehicle out of the flight "
+            f"volume, tilted past 80 degrees or non-finite ({', '.join(fell)}): the vehicle's "
+            "controller does not hold it on these references with this excitation",
+            IdentificationWarning,
+            stacklevel=2,
+        )
+    return trajs

@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from identification.data import (
+    IdentificationWarning,
     Trajectory,
     load_npz,
     read_csv,
@@ -188,6 +189,20 @@ def test_excitation_rollouts_fly_every_action_mode_as_the_collective_one(env_kwa
     assert len(other[0]) == len(base[0]) == 300
     np.testing.assert_allclose(other[0].u, base[0].u, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(other[0].x, base[0].x, rtol=1e-4, atol=1e-5)
+
+
+def test_excitation_flights_that_end_early_are_named():
+    """A Pelican's third flight with 5 % excitation leaves the flight volume after 90 rows;
+    before, the user got three long flights and one short one with no word. The short
+    flight is kept (it is data) and named; flights that all run their length are not."""
+    ended = r"1 of 3 flight\(s\) ended early.*after 90 rows"
+    with pytest.warns(IdentificationWarning, match=ended):
+        trajs = excitation_rollouts("Quad6DOF-v0", episodes=3, seed=0, noise=0.05,
+                                    env_kwargs={"vehicle": "pelican"})  # fmt: skip
+    assert [len(t) for t in trajs] == [1000, 1000, 90]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", IdentificationWarning)
+        assert all(len(t) == 200 for t in excitation_rollouts("PlanarQuad-v0", 2, steps=200))
 
 
 def test_simulate_takes_each_rows_own_step():
