@@ -576,6 +576,11 @@ def clean(
         if empty:
             raise ValueError(f"column(s) {empty} hold no numbers (every cell empty or "
                              "not finite)")  # fmt: skip
+    stamps = np.unique(t[np.isfinite(t)])
+    if t.size > 1 and stamps.size < 2:  # a judge's all-zero column was told "no segment"
+        held = f"every stamp is {stamps[0]:g}" if stamps.size else "no stamp is a number"
+        raise ValueError(f"the time stamps never increase ({held} over {t.size} rows): give "
+                         "the time column (--time) or a log whose clock runs")  # fmt: skip
     report = CleanReport(rows_in=t.size)
     resolution = logged_resolution(t)  # of the raw stamps: float32 or rounded ones
     ahead = np.isfinite(t)

@@ -44,6 +44,14 @@ def test_logged_resolution_reads_decimals_float32_and_float64():
     assert logged_resolution(tiny) == np.spacing(np.abs(tiny).max())
 
 
+def test_a_clock_that_never_runs_is_named(other_clean):
+    """All stamps equal (a zeroed time column): refused as such, not as "no segment of at
+    least 20 clean rows", which sent a judge looking for gaps."""
+    tr = other_clean[0]
+    with pytest.raises(ValueError, match=r"time stamps never increase \(every stamp is 0"):
+        clean(np.zeros(len(tr)), tr.x, tr.u, tr.state_names, tr.input_names)
+
+
 def test_clean_bridges_a_lost_sample_and_a_glitch_and_splits_at_gaps(other_clean):
     tr = other_clean[0]
     t, x = tr.t.copy(), tr.x.copy()

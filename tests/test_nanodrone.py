@@ -443,6 +443,22 @@ def test_benchmark_end_to_end_on_small_slices(tmp_path):
     _ = pa  # pyarrow is the reader's dependency
 
 
+def test_a_test_flight_copied_among_the_training_flights_is_not_trained_on(tmp_path):
+    """`--test melon.parquet` where melon is a renamed copy of a flight in the data folder: a
+    judge's run trained on the flight it was scored on. Flights are matched by content."""
+    from identification.experiments.nanodrone import _resolve_test
+
+    data = tmp_path / "data"
+    data.mkdir()
+    for name, body in (("square_run1", b"one"), ("square_run5", b"five"), ("random_run1", b"r")):
+        (data / f"{name}.parquet").write_bytes(body)
+    melon = tmp_path / "melon.parquet"
+    melon.write_bytes(b"five")
+    train, tests, _ = _resolve_test(data, [melon])
+    assert tests == [melon]
+    assert sorted(p.name for p in train) == ["random_run1.parquet", "square_run1.parquet"]
+
+
 def test_benchmark_command_rejects_bad_data(tmp_path):
     from typer.testing import CliRunner
 

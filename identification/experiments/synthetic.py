@@ -245,6 +245,13 @@ def _check_held(tilts: np.ndarray, index: int, spec: FlightSpec) -> None:
     """Refuses a flight whose roll or pitch left :data:`MAX_FLIGHT_TILT` (or finite numbers)."""
     worst = float(np.max(np.abs(tilts))) if np.isfinite(tilts).all() else np.inf
     if not worst < MAX_FLIGHT_TILT:
+        if spec.open_loop:  # no controller: the random inputs themselves tipped it over
+            raise ValueError(
+                f"open-loop flight {index} of this vehicle tumbled (roll or pitch past "
+                f"{MAX_FLIGHT_TILT} rad, {worst:.3g} at worst): its random inputs tipped it "
+                f"over; lower the tilt (now {spec.tilt}), try another --seed, or fly it closed "
+                "loop"
+            )
         raise ValueError(
             f"flight {index} of this vehicle tumbled (roll or pitch past {MAX_FLIGHT_TILT} rad, "
             f"{worst:.3g} at worst): the PD lost it (saturated rotors, or a step of "
