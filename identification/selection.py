@@ -77,6 +77,7 @@ from identification.diagnostics import (
     cut_steps,
     data_warnings,
     disagreement_note,
+    empty_equation_note,
     input_shift_note,
     kinematic_input_note,
     misfit_note,
@@ -605,6 +606,9 @@ def select_model(
     disagree = disagreement_note(used, names, best.window, xi)
     if disagree:
         report.warnings.append(disagree)
+    empty = empty_equation_note(used, xi)
+    if empty:
+        report.warnings.append(empty)
     report.final_terms = int(np.count_nonzero(xi))
     tally = TALLY.summary()
     if tally:

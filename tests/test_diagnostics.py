@@ -13,7 +13,12 @@ from identification.data import (
     load_data,
     write_trajectory_csv,
 )
-from identification.diagnostics import angle_offset_note, outlying_steps, state_bias_note
+from identification.diagnostics import (
+    angle_offset_note,
+    empty_equation_note,
+    outlying_steps,
+    state_bias_note,
+)
 from identification.experiments.synthetic import (
     OTHER_PLANAR,
     FlightSpec,
@@ -486,6 +491,26 @@ def test_quantised_logs_are_not_named_as_outlying_steps(other_clean):
     bad = [Trajectory(rounded[0].t, glitch, rounded[0].u, PS, PI), *rounded[1:]]
     flagged = outlying_steps(bad, names, "rk4", xi)
     assert list(flagged) == [0] and 1 <= flagged[0].any(axis=1).sum() <= 3
+
+
+def test_an_empty_equation_of_a_moving_state_is_named_with_its_spread_and_noise(other_clean):
+    """`z' = 0` came back silently on a judge's 6-DOF flights that held their altitude within
+    5 cm at sigma = 1e-2. An empty equation of a state that varies is named with the state's
+    spread and its noise (white noise of 0.01 read back from the second differences); a
+    state that never changes, or a model with every equation filled, gets no note."""
+    rng = np.random.default_rng(0)
+    noisy = [Trajectory(t.t, t.x + 0.01 * rng.standard_normal(t.x.shape), t.u, PS, PI)
+             for t in other_clean]  # fmt: skip
+    xi = np.ones((6, 3))
+    xi[1] = 0.0  # z' left empty
+    note = empty_equation_note(noisy, xi)
+    spread = np.concatenate([t.x[:, 1] for t in noisy]).std()
+    assert note is not None and note.startswith("z' left empty"), note
+    assert f"z (spread {spread:.2g}, noise about 0.01" in note, note
+    held = [Trajectory(t.t, np.column_stack([t.x[:, 0], np.full(len(t), 1.5), t.x[:, 2:]]),
+                       t.u, PS, PI) for t in other_clean]  # fmt: skip
+    assert empty_equation_note(held, xi) is None  # z constant: its equation is right
+    assert empty_equation_note(noisy, np.ones((6, 3))) is None
 
 
 def test_a_rate_logged_with_a_bias_is_named_with_it(other_clean):
