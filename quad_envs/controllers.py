@@ -38,12 +38,18 @@ class PlanarPD:
     Args:
         params: Vehicle parameters the controller believes in.
         gains: PD gains.
+        max_tilt: Largest roll the position loop commands [rad]; unlimited (the paper's law)
+            by default. Far waypoints command tilts of several radians, which a vehicle with
+            less control authority than the paper's cannot follow.
     """
 
     def __init__(
-        self, params: PlanarQuadParams = PAPER_PLANAR, gains: PlanarPDGains = PlanarPDGains()
+        self,
+        params: PlanarQuadParams = PAPER_PLANAR,
+        gains: PlanarPDGains = PlanarPDGains(),
+        max_tilt: float = np.inf,
     ) -> None:
-        self.params, self.gains = params, gains
+        self.params, self.gains, self.max_tilt = params, gains, float(max_tilt)
 
     def __call__(self, state: FloatArray, ref: FloatArray) -> FloatArray:
         """Commanded [u1, u2] for planar states (..., 6) and references (..., 6)."""
@@ -54,6 +60,10 @@ class PlanarPD:
         y_ddot_d, z_ddot_d = ref[..., 4], ref[..., 5]
         phi_c = -(y_ddot_d + k.kv_y * (y_dot_d - y_dot) + k.kp_y * (y_d - y)) / g
         phi_c_dot = -(k.kv_y * (y_ddot_d + g * phi) + k.kp_y * (y_dot_d - y_dot)) / g
+        if np.isfinite(self.max_tilt):  # a held limit: its command does not move
+            limited = np.abs(phi_c) > self.max_tilt
+            phi_c = np.clip(phi_c, -self.max_tilt, self.max_tilt)
+            phi_c_dot = np.where(limited, 0.0, phi_c_dot)
         u = np.empty(np.broadcast_shapes(np.shape(state)[:-1], np.shape(ref)[:-1]) + (2,))
         u[..., 0] = self.params.mass * (
             g + z_ddot_d + k.kv_z * (z_dot_d - z_dot) + k.kp_z * (z_d - z)
@@ -87,12 +97,18 @@ class Quad6DOFPD:
     Args:
         params: Vehicle parameters the controller believes in.
         gains: PD gains.
+        max_tilt: Largest tilt the position loop commands [rad] (the horizontal acceleration
+            command is scaled to g max_tilt); unlimited by default. A Pelican flying the
+            excitation waypoints was commanded 6 rad and fell.
     """
 
     def __init__(
-        self, params: Quad6DOFParams = PAPER_6DOF, gains: Quad6DOFPDGains = Quad6DOFPDGains()
+        self,
+        params: Quad6DOFParams = PAPER_6DOF,
+        gains: Quad6DOFPDGains = Quad6DOFPDGains(),
+        max_tilt: float = np.inf,
     ) -> None:
-        self.params, self.gains = params, gains
+        self.params, self.gains, self.max_tilt = params, gains, float(max_tilt)
 
     def __call__(self, state: FloatArray, ref: FloatArray) -> FloatArray:
         """Commanded [u1, u2, u3, u4] for states (..., 12) and 3-D references (..., 11)."""
@@ -101,6 +117,10 @@ class Quad6DOFPD:
         kp = np.array([k.kp_xy, k.kp_xy, k.kp_z])
         kv = np.array([k.kv_xy, k.kv_xy, k.kv_z])
         acc_c = ref[..., 6:9] + kv * (ref[..., 3:6] - vel) + kp * (ref[..., 0:3] - state[..., 0:3])
+        if np.isfinite(self.max_tilt):
+            level = np.hypot(acc_c[..., 0], acc_c[..., 1])
+            scale = np.minimum(1.0, g * self.max_tilt / np.maximum(level, 1e-300))
+            acc_c = np.concatenate([acc_c[..., :2] * scale[..., None], acc_c[..., 2:]], axis=-1)
         psi_d, psi_dot_d = ref[..., 9], ref[..., 10]
         sp, cp = np.sin(psi_d), np.cos(psi_d)
         angle_c = np.stack(

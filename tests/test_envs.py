@@ -358,3 +358,34 @@ def test_reset_options_and_params_of_another_kind_are_refused_by_name():
         gym.make("PlanarQuad-v0", params=PAPER_6DOF)
     env = gym.make("CrazyflieMotors-v0", params={"mass": 0.05})  # changes, as the others take
     assert env.unwrapped.params.mass == 0.05
+
+
+def test_a_tilt_limit_bounds_the_commanded_tilt_and_is_off_by_default():
+    """`max_tilt` scales the position loop's horizontal command (6-DOF) or clips the roll
+    command (planar) so that the attitude it asks for stays within the limit; left out, the
+    commands are the paper's law, bit for bit."""
+    rng = np.random.default_rng(0)
+    far = rng.normal(0.0, 3.0, size=(200, 11))  # references metres away: tilts of radians
+    state = rng.normal(0.0, 0.1, size=(200, 12))
+    pd, limited = Quad6DOFPD(), Quad6DOFPD(max_tilt=0.5)
+    np.testing.assert_array_equal(Quad6DOFPD(max_tilt=np.inf)(state, far), pd(state, far))
+    # the attitude loop's moment is J Kp (angle_c - angle) + ...: read angle_c back off it
+    k = np.asarray(pd.gains.kp_att)[:2]
+    rate = np.asarray(pd.gains.kv_att)[:2] * state[:, 9:11]
+    angle_c = (limited(state, far)[:, 1:3] / pd.params.inertia[:2] + rate) / k + state[:, 3:5]
+    assert np.all(np.hypot(angle_c[:, 0], angle_c[:, 1]) <= 0.5 + 1e-9)
+    free = (pd(state, far)[:, 1:3] / pd.params.inertia[:2] + rate) / k + state[:, 3:5]
+    assert np.hypot(free[:, 0], free[:, 1]).max() > 2.0  # the limit acted
+    planar_state, planar_ref = state[:, :6], far[:, :6]
+    np.testing.assert_array_equal(PlanarPD(max_tilt=np.inf)(planar_state, planar_ref),
+                                  PlanarPD()(planar_state, planar_ref))  # fmt: skip
+    # planar: where the free roll command passes the limit, the limit is held (its rate 0)
+    g, ixx = PlanarPD().gains, PlanarPD().params.Ixx
+    y, y_dot, phi, phi_dot = (planar_state[:, j] for j in (0, 3, 2, 5))
+    free_phi = -(planar_ref[:, 4] + g.kv_y * (planar_ref[:, 2] - y_dot)
+                 + g.kp_y * (planar_ref[:, 0] - y)) / 9.81  # fmt: skip
+    over = np.abs(free_phi) > 0.3
+    assert over.sum() > 50
+    u = PlanarPD(max_tilt=0.3)(planar_state, planar_ref)
+    phi_c = (u[:, 1] / ixx + g.kv_phi * phi_dot) / g.kp_phi + phi
+    np.testing.assert_allclose(phi_c[over], 0.3 * np.sign(free_phi[over]), atol=1e-9)

@@ -192,14 +192,22 @@ def test_excitation_rollouts_fly_every_action_mode_as_the_collective_one(env_kwa
 
 
 def test_excitation_flights_that_end_early_are_named():
-    """A Pelican's third flight with 5 % excitation leaves the flight volume after 90 rows;
-    before, the user got three long flights and one short one with no word. The short
-    flight is kept (it is data) and named; flights that all run their length are not."""
+    """A Pelican's third flight with 5 % excitation leaves the flight volume after 90 rows
+    (the waypoints command tilts of several radians); before, the user got two long
+    flights and one short one with no word. The short flight is kept (it is data) and
+    named; with the commanded tilt limited the flights run their length, and flights that
+    all run their length are not named."""
     ended = r"1 of 3 flight\(s\) ended early.*after 90 rows"
     with pytest.warns(IdentificationWarning, match=ended):
         trajs = excitation_rollouts("Quad6DOF-v0", episodes=3, seed=0, noise=0.05,
                                     env_kwargs={"vehicle": "pelican"})  # fmt: skip
     assert [len(t) for t in trajs] == [1000, 1000, 90]
+    with warnings.catch_warnings():  # the tilt it is commanded limited, it stays up
+        warnings.simplefilter("error", IdentificationWarning)
+        held = excitation_rollouts("Quad6DOF-v0", episodes=3, seed=0, noise=0.05,
+                                   env_kwargs={"vehicle": "pelican"}, max_tilt=0.6)  # fmt: skip
+    assert [len(t) for t in held] == [1000] * 3
+    assert max(float(np.abs(t.x[:, 3:5]).max()) for t in held) < 0.8
     with warnings.catch_warnings():
         warnings.simplefilter("error", IdentificationWarning)
         assert all(len(t) == 200 for t in excitation_rollouts("PlanarQuad-v0", 2, steps=200))

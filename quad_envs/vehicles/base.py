@@ -114,9 +114,11 @@ class Vehicle:
         """State at rest on the reference sample ``ref0``."""
         return self.rest_state(ref0)
 
-    def default_controller(self) -> Controller:
-        """The vehicle's feedback law for its parameters."""
-        return self.controller(self.params)
+    def default_controller(self, max_tilt: float | None = None) -> Controller:
+        """The vehicle's feedback law for its parameters (``max_tilt``: its tilt limit [rad])."""
+        if max_tilt is None:
+            return self.controller(self.params)
+        return self.controller(self.params, max_tilt=max_tilt)
 
     @property
     def n_states(self) -> int:

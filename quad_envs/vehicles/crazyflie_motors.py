@@ -235,11 +235,14 @@ class MotorSpeedPD:
 
     Args:
         params: Vehicle parameters the controller believes in.
+        max_tilt: Largest tilt the position loop commands [rad] (see ``Quad6DOFPD``).
     """
 
-    def __init__(self, params: MotorSpeedParams = CRAZYFLIE_MOTOR_SPEEDS) -> None:
+    def __init__(
+        self, params: MotorSpeedParams = CRAZYFLIE_MOTOR_SPEEDS, max_tilt: float = np.inf
+    ) -> None:
         self.params = params
-        self._pd = Quad6DOFPD(params.rigid_body)
+        self._pd = Quad6DOFPD(params.rigid_body, max_tilt=max_tilt)
         self._unmix = np.linalg.inv(_MIX)
 
     def __call__(self, state: FloatArray, ref: FloatArray) -> FloatArray:
