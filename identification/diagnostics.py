@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.data import Trajectory, clock_line
+from identification.data import Trajectory, clock_line, logged_resolution
 from identification.features import compile_features, parse_term, term_name
 from identification.fit import (
     Gram,
@@ -127,32 +127,19 @@ def outlying_steps(
     return {i: f for i, f in flagged.items() if f.any()}
 
 
-def resolution(x: np.ndarray) -> float:
-    """The grid a logged signal lies on (an encoder's or a mocap's resolution), or 0.
-
-    The smallest non-zero change between rows, where every change is a whole number of it
-    (within 1 %) and at least 10 rows change.
-    """
-    d = np.abs(np.diff(np.asarray(x, dtype=float)))
-    moved = d[d > 0]
-    if moved.size < 10:
-        return 0.0
-    q = float(moved.min())
-    levels = moved / q
-    return q if np.all(np.abs(levels - np.round(levels)) < 0.01) else 0.0
-
-
 def quantisation_noise(trajs: Sequence[Trajectory]) -> np.ndarray:
     """Each state's quantisation noise in its step-wise target ``dx / dt``, 0 where none.
 
-    A state on a grid q carries rounding noise uniform in +-q / 2 on each sample; the
-    difference of two over a step dt has deviation q / (dt sqrt(6)). A trial's 1 cm and
-    0.01 rad logs had 38 % of their steps named as outlying against a median departure that
-    the few levels of their residuals put near zero.
+    A state logged to a step q (:func:`~identification.data.logged_resolution`: decimals,
+    float32) carries rounding noise uniform in +-q / 2 on each sample; the difference of two
+    over a step dt has deviation q / (dt sqrt(6)). A trial's 1 cm and 0.01 rad logs had 38 %
+    of their steps named as outlying against a median departure that the few levels of
+    their residuals put near zero. Unrounded float64 states give round-off here. Only
+    observed rows are read (bridged rows are interpolated off the grid).
     """
-    x = np.concatenate([t.x for t in trajs])
+    x = np.concatenate([t.x[t.observed] for t in trajs])
     dt = float(np.median(np.concatenate([np.diff(t.t) for t in trajs])))
-    grid = np.array([resolution(col) for col in x.T])
+    grid = np.array([logged_resolution(col) for col in x.T])
     return grid / (dt * np.sqrt(6.0))
 
 
@@ -659,6 +646,21 @@ KINEMATIC_TOL = 0.02
 """A term ``R v`` with a coefficient within this of +-1 reads as a kinematic relation."""
 
 
+def _kinematic(term: tuple, coef: float, moving: set[str], angles: set[str]) -> bool:
+    """Whether ``coef term`` reads as a kinematic relation (``phi_dot``, ``p cos(theta)``).
+
+    One state that is not an angle, to the first power, times functions of the angles only,
+    with a coefficient within :data:`KINEMATIC_TOL` of +-1.
+    """
+    plain = [f for f in term if f.var in moving and f.kind == "pow"]
+    return (
+        abs(abs(coef) - 1) < KINEMATIC_TOL
+        and len(plain) == 1
+        and plain[0].k == 1
+        and all(f.var in angles for f in term if f is not plain[0])
+    )
+
+
 def state_bias_note(
     xi: np.ndarray, names: Sequence[str], state_names: Sequence[str], spread: np.ndarray
 ) -> str | None:
@@ -670,7 +672,7 @@ def state_bias_note(
     and ``-0.008571 r`` beside ``0.8571 p r`` in q', with no note (2 % of the range off at
     1 s on flights without the bias). For each pair ``c1 R v``, ``c0 R`` in one equation
     the bias is ``b = -c0 / c1``; where every pair of a state agrees on it (within 10 %),
-    one of them is a kinematic relation (``c1`` within :data:`KINEMATIC_TOL` of +-1, as
+    one of them is a kinematic relation (:func:`_kinematic`: ``c1`` within 2 % of +-1, as
     ``phi' = phi_dot``: a drag term ``-k v`` beside a wind constant is not) and ``|b|``
     exceeds :data:`BIAS_FLOOR` of the state's spread, the state is named with ``b``.
 
@@ -680,8 +682,11 @@ def state_bias_note(
         state_names: State names.
         spread: Each state's standard deviation on the data.
     """
+    angles = trig_variables(names)
+    moving = set(state_names) - angles
     for k, v in enumerate(state_names):
         found: list[tuple[str, float, float]] = []
+        kinematic = False
         for i, state in enumerate(state_names):
             terms = {parse_term(names[j]): float(xi[i, j]) for j in np.flatnonzero(xi[i])}
             for term, c1 in terms.items():
@@ -691,7 +696,8 @@ def state_bias_note(
                 rest = tuple(f for f in term if f.var != v)
                 if rest in terms:
                     found.append((state, c1, -terms[rest] / c1))
-        if not found or not any(abs(abs(c1) - 1) < KINEMATIC_TOL for _, c1, _ in found):
+                    kinematic = kinematic or _kinematic(term, c1, moving, angles)
+        if not kinematic:
             continue
         biases = np.array([b for _, _, b in found])
         bias = float(np.mean(biases))
@@ -731,19 +737,15 @@ def kinematic_input_note(
     """
     states, inputs = trajs[0].state_names, trajs[0].input_names
     angles = trig_variables(names)
-    unknown = set(states) - set(angles)
+    moving = set(states) - angles
     x = np.concatenate([t.x for t in trajs])
     u = np.concatenate([t.u for t in trajs])
     where: list[str] = []
     for i, state in enumerate(states):
         cols = np.flatnonzero(xi[i])
         terms = [parse_term(names[j]) for j in cols]
-        kinematic = any(
-            abs(abs(xi[i, j]) - 1) < KINEMATIC_TOL
-            and sum(f.var in unknown and f.kind == "pow" and f.k == 1 for f in term) == 1
-            and all(f.var in angles for f in term if not (f.var in unknown and f.kind == "pow"))
-            for j, term in zip(cols, terms, strict=True)
-        )
+        kinematic = any(_kinematic(term, xi[i, j], moving, angles)
+                        for j, term in zip(cols, terms, strict=True))  # fmt: skip
         driven = [j for j, t in zip(cols, terms, strict=True) if any(f.var in inputs for f in t)]
         if not (kinematic and driven):
             continue
