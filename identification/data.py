@@ -917,8 +917,10 @@ def resolve_names(
         st, inp = list(known_s), list(known_i)
     else:
         candidates = [c for c in cols if c != time and not _ignored(c)]
-        if inputs is None:
-            inp = [c for c in candidates if re.fullmatch(r"u\d+", c)]
+        if inputs is None:  # u1, u2, ...; else rotor commands Tc1, Tc2, ... (rotor dynamics)
+            inp = [c for c in candidates if re.fullmatch(r"u\d+", c)] or [
+                c for c in candidates if re.fullmatch(r"Tc\d+", c)
+            ]
         else:
             inp = list(inputs)
         st = list(states) if states is not None else [c for c in candidates if c not in inp]
@@ -936,8 +938,8 @@ def resolve_names(
         left = [c for c in cols if c not in {*st, time} and not _ignored(c)]
         if states is None or left:
             raise ValueError(
-                f"no inputs among the columns {cols} (inputs are u1, u2, ... unless --inputs "
-                "names them)"
+                f"no inputs among the columns {cols} (inputs are u1, u2, ..., or rotor "
+                "commands Tc1, Tc2, ..., unless --inputs names them)"
                 + (f"; the columns {left} are neither states nor inputs" if left else "")
                 + ": name the inputs with --inputs, or, for a system without inputs, name "
                 "every state with --states"

@@ -137,8 +137,42 @@ def quad6dof_drag_library() -> list[str]:
     return list(dict.fromkeys([*quad6dof_library(), *drag_terms(["u", "v", "w"])]))
 
 
-PRESETS = ("planar", "quad6dof", "planar_drag", "quad6dof_drag")
+def rotor_names(rotors: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """Names of the rotor thrust states and of their commands: (T1..Tk), (Tc1..Tck)."""
+    return (tuple(f"T{i + 1}" for i in range(rotors)),
+            tuple(f"Tc{i + 1}" for i in range(rotors)))  # fmt: skip
+
+
+def rotor_library(system: str) -> list[str]:
+    """A preset library with the rotor thrusts and their commands in the inputs' place.
+
+    For data with rotor dynamics (a first-order lag from each command Tc_i to the thrust
+    state T_i: ``collect_rollouts`` records them so): every term of the preset that holds
+    the thrust ``u1`` is repeated with each of T1..Tk and Tc1..Tck in its place, and the
+    terms of the moments (u2..) are dropped, the moments being linear in the thrusts. The
+    rest is kept. ``planar``: 18 + 3 x 4 = 30 terms; ``quad6dof``: 339 + 45 x 8 = 699.
+    """
+    from quad_envs.vehicles import get_vehicle
+
+    record = get_vehicle(system)
+    thrusts, commands = rotor_names(int(record.params.mixer.shape[1]))
+    variables = (*record.state_names, *thrusts, *commands)
+    inputs = "|".join(record.input_names)
+    names: list[str] = []
+    for name in default_library(system):
+        held = re.findall(rf"\b({inputs})\b", name)
+        if not held:
+            names.append(name)
+        elif held == [record.input_names[0]]:
+            names += [re.sub(rf"\b{held[0]}\b", rotor, name) for rotor in (*thrusts, *commands)]
+    return list(dict.fromkeys(term_name(parse_term(n, variables)) for n in names))
+
+
+PRESETS = ("planar", "quad6dof", "planar_drag", "quad6dof_drag", "planar_rotors", "quad6dof_rotors")
 """Names of the preset libraries."""
+
+PRESET_SUFFIXES = ("_drag", "_rotors")
+"""A preset is its vehicle's name, or that name with one of these suffixes."""
 
 
 def default_library(system: str) -> list[str]:
@@ -149,6 +183,8 @@ def default_library(system: str) -> list[str]:
         return planar_drag_library()
     if system == "quad6dof_drag":
         return quad6dof_drag_library()
+    if system in ("planar_rotors", "quad6dof_rotors"):
+        return rotor_library(system.removesuffix("_rotors"))
     if system in VEHICLES:
         return vehicle_library(system)
     valid = ", ".join(dict.fromkeys([*PRESETS, *VEHICLES]))
@@ -483,8 +519,14 @@ def _check_preset_variables(
     missing = used - set(variables)
     if not missing:
         return
-    record = get_vehicle(preset.removesuffix("_drag"))
+    base = preset
+    for suffix in PRESET_SUFFIXES:
+        base = base.removesuffix(suffix)
+    record = get_vehicle(base)
     order = [*record.state_names, *record.input_names]
+    if preset.endswith("_rotors"):
+        thrusts, commands = rotor_names(int(record.params.mixer.shape[1]))
+        order = [*record.state_names, *thrusts, *commands]
     own = [v for v in order if v in used] + sorted(used - set(order))
     lacked = [v for v in own if v in missing]
     example = _preset_as_spec(names, record.angle_names, angles)

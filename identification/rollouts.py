@@ -6,6 +6,12 @@ is kept in ``Trajectory.meta["commanded"]``. That is what a simulator can give a
 vehicle cannot. ``record="measured"`` records what a flight log holds instead: the state as
 the sensors report it (the observation's state entries, with the env's noise, bias and delay;
 angles unwrapped) and the commanded input.
+
+With rotor dynamics (``effects=["rotor_dynamics"]``) the collective input changes within
+each step as the rotors follow their commands, so no held input describes a step: ``truth``
+then records the rotor thrusts as states ``T1..Tk`` after the rigid-body ones and, as the
+inputs, the thrusts the rotors were commanded over each step (after their limits)
+``Tc1..Tck``, the data of ``--library planar_rotors`` / ``quad6dof_rotors``.
 """
 
 from __future__ import annotations
@@ -50,7 +56,8 @@ def collect_rollouts(
         max_steps: Cap on steps per episode (the env's time limit otherwise).
         env_kwargs: Passed to ``gym.make``.
         reset_options: (episode, rng) -> options for that episode's ``reset``.
-        record: ``truth`` (the true state and the applied input) or ``measured`` (the
+        record: ``truth`` (the true state and the applied input; with rotor dynamics the
+            rotor thrusts too, and their commands as the inputs) or ``measured`` (the
             observed state and the commanded input: what a real log holds).
 
     Returns:
@@ -65,6 +72,12 @@ def collect_rollouts(
     base = env.unwrapped
     vehicle = base.vehicle
     n = len(vehicle.state_names)
+    state_names, input_names = vehicle.state_names, vehicle.input_names
+    rotors = bool(base.effects.rotor_dynamics) and record == "truth"
+    if rotors:  # the rotors' thrusts are states; their commands, held over a step, the inputs
+        k = base.params.mixer.shape[1]
+        state_names = (*state_names, *(f"T{i + 1}" for i in range(k)))
+        input_names = tuple(f"Tc{i + 1}" for i in range(k))
     angles = [vehicle.state_names.index(a) for a in vehicle.angle_names]
     measured = record == "measured"
     rng = np.random.default_rng(seed)
@@ -82,11 +95,15 @@ def collect_rollouts(
                 action = np.clip(action + action_noise * half * rng.standard_normal(half.shape),
                                  space.low, space.high)  # fmt: skip
             ts.append(info["time"])
-            xs.append(np.array(obs[:n], dtype=np.float64) if measured else info["state"])
+            if measured:
+                xs.append(np.array(obs[:n], dtype=np.float64))
+            else:
+                xs.append(np.concatenate([info["state"], info["rotor_thrusts"]]) if rotors
+                          else info["state"])  # fmt: skip
             refs.append(info["reference"])
             obs, _, terminated, truncated, info = env.step(action.astype(space.dtype))
-            applied = info["action"]
-            commanded.append(info.get("commanded", applied))
+            applied = info["rotor_commands"] if rotors else info["action"]
+            commanded.append(info.get("commanded", info["action"]))
             us.append(commanded[-1] if measured else applied)
             steps += 1
             if terminated or truncated or (max_steps is not None and steps >= max_steps):
@@ -102,8 +119,8 @@ def collect_rollouts(
                     np.array(ts),
                     x,
                     np.array(us),
-                    vehicle.state_names,
-                    vehicle.input_names,
+                    state_names,
+                    input_names,
                     refs=np.array(refs),
                     meta=meta,
                 )  # fmt: skip

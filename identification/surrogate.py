@@ -11,6 +11,7 @@ the rollout went past it (in widths of the range; 0 inside): the model was teste
 from __future__ import annotations
 
 import os
+import re
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -84,6 +85,14 @@ def _mismatch(model: IdentifiedModel, base_id: str, theirs: tuple) -> str:
     owner = next(iter(vehicles_with(model.state_names, model.input_names)), None)
     if owner is not None:
         return head + f": it is a model of the {owner} vehicle; use that vehicle's env"
+    extra = set(model.state_names) - set(theirs[0])
+    if extra and all(re.fullmatch(r"T\d+", n) for n in extra):
+        return head + (
+            ": a model with rotor-thrust states (rollouts of an env with rotor dynamics) has "
+            "no surrogate env: the surrogates step the rigid body under the collective input "
+            "(identify from flights without rotor dynamics, or fly the model with "
+            "model.simulate)"
+        )
     return head + (
         f": a surrogate steps its vehicle's variables, so identify from a log of those "
         f"quantities (inputs {', '.join(theirs[1])}: the collective thrust and moments, what "

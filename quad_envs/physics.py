@@ -483,6 +483,24 @@ def command_batch(A, P, C, mix, unmix, box, frac, u_app, u_cmd, work):  # noqa: 
     return True
 
 
+@numba.njit(**KERNEL_JIT)
+def rotor_command_batch(A, P, C, mix, unmix, box, frac, thrust, work):  # noqa: ANN001, ANN201
+    """Rotor commands -> the thrust each rotor is commanded, after its limits (written).
+
+    Row i of ``thrust`` (b, k) is what the rotors of member i follow over the step: with
+    rotor dynamics the thrust states' targets, held over the step. Returns False if an
+    action is not finite.
+    """
+    m, k = mix.shape
+    if not _all_finite(A):
+        return False
+    raw, u_cmd = work[7, : A.shape[1]], work[6, :m]
+    for i in range(A.shape[0]):
+        p = P[0] if P.shape[0] == 1 else P[i]
+        _command_one(A[i], p, C, mix, unmix, box, frac, thrust[i], u_cmd, raw, m, k)
+    return True
+
+
 @numba.njit(cache=True)
 def episode_starts(  # noqa: ANN201
     X0, n, U, n_offset, offset_scale, spread, P0, factor_of_entry, more_factors,  # noqa: ANN001

@@ -369,6 +369,23 @@ def _matching_vehicle(state_names: tuple[str, ...], input_names: tuple[str, ...]
     return next((n for n in vehicles_with(state_names, input_names) if n in PRESETS), None)
 
 
+def _matching_rotor_preset(
+    state_names: tuple[str, ...], input_names: tuple[str, ...]
+) -> str | None:
+    """The ``_rotors`` preset whose variables these are (a vehicle's states, T1..Tk, Tc1..Tck)."""
+    from identification.libraries import rotor_names
+    from quad_envs.vehicles import get_vehicle
+
+    for name in ("planar", "quad6dof"):
+        record = get_vehicle(name)
+        thrusts, commands = rotor_names(int(record.params.mixer.shape[1]))
+        if set(state_names) == {*record.state_names, *thrusts} and set(input_names) == set(
+            commands
+        ):
+            return f"{name}_rotors"
+    return None
+
+
 @app.command()
 def identify(
     data: Annotated[list[Path], typer.Argument(help="CSV, parquet or NPZ trajectory files")],
@@ -402,7 +419,8 @@ def identify(
     library: Annotated[
         str | None,
         typer.Option(
-            help="planar | quad6dof | planar_drag | quad6dof_drag | a vehicle | FILE.toml | "
+            help="planar | quad6dof | planar_drag | quad6dof_drag | planar_rotors | "
+            "quad6dof_rotors | a vehicle | FILE.toml | "
             "'degree=2;angles=phi;trig_degree=2;angle_products=true;extra=...'"
         ),
     ] = None,
@@ -498,6 +516,13 @@ def identify(
                 first = trajs[0]
             else:  # the default spec: states named as angles enter through sin and cos
                 declared = [n for n in first.state_names if _looks_like_angle(n)]
+                library = _matching_rotor_preset(first.state_names, first.input_names)
+                if library is not None:  # (rollouts of an env with rotor dynamics)
+                    library_note = (
+                        f"library: the {library} preset (the data's variables are the "
+                        f"{library.removesuffix('_rotors')} vehicle's states, its rotor thrusts "
+                        "and their commands; --library or --angles choose another)"
+                    )
                 if declared:  # (a trial's rotor-thrust log: phi^2 and f1 phi, 1.9 % at 1 s)
                     trajs, cleaning = load_data(*read, angles=declared, measured=first.measured,
                                                 time_unit=unit, angle_unit=turn)  # fmt: skip

@@ -146,6 +146,34 @@ def test_identify_picks_the_preset_of_a_vehicle_whose_variables_the_data_name(
     assert "sin(phi) u1" in model.feature_names and model.n_terms == 7
 
 
+def test_identify_takes_the_rotor_preset_for_rollouts_with_rotor_dynamics(
+    monkeypatch, capsys, tmp_path
+):
+    """Rollouts of an env with rotor lag (states T1, T2, inputs Tc1, Tc2) need no option:
+    identify reads Tc1, Tc2 as the inputs and takes the planar_rotors preset; the lag
+    (tau = 0.025 s of a 0.9 kg vehicle) comes out exact."""
+    from identification.data import write_trajectory_csv
+    from identification.model import load_model
+    from identification.rollouts import excitation_rollouts
+
+    params = {"mass": 0.9, "Ixx": 6e-3, "rotor_time_constant": 0.025, "rotor_force_max": 7.0}
+    kw = {"params": params, "effects": ["rotor_dynamics"]}
+    trajs = excitation_rollouts("PlanarQuad-v0", episodes=3, seed=2, steps=500, env_kwargs=kw,
+                                max_tilt=0.6)  # fmt: skip
+    assert not any(t.meta["terminated"] for t in trajs)
+    paths = [str(write_trajectory_csv(tmp_path / f"f{i}.csv", t)) for i, t in enumerate(trajs)]
+    code, out, err = run_cli(monkeypatch, capsys, "identify", *paths, "--out",
+                             str(tmp_path / "m.json"))  # fmt: skip
+    assert code in (0, None), err
+    assert "the planar_rotors preset" in out
+    model = load_model(tmp_path / "m.json")
+    assert model.input_names == ("Tc1", "Tc2")
+    lag = dict(zip(model.feature_names, model.coefficients[model.state_names.index("T2")],
+                   strict=True))  # fmt: skip
+    assert {k for k, v in lag.items() if v} == {"T2", "Tc2"}
+    assert lag["Tc2"] == pytest.approx(40.0, rel=1e-6) and lag["T2"] == pytest.approx(-40.0)
+
+
 def test_simulate_flies_another_vehicle_that_identify_then_recovers(monkeypatch, capsys, tmp_path):
     """``simulate --param`` flies a vehicle of the user's (here m = 0.7 kg, Ixx = 5e-3): the
     identified inputs' gains are its own 1/m and 1/Ixx, not the paper vehicle's (5.6, 4000)."""

@@ -14,6 +14,7 @@ from identification.libraries import (
     drag_terms,
     library_from_spec,
     planar_library,
+    rotor_library,
 )
 from identification.model import IdentifiedModel
 from quad_envs.dynamics import planar_drag
@@ -186,7 +187,7 @@ def test_6dof_drag_truth_is_the_hand_computed_body_drag() -> None:
 
 
 def test_6dof_rotor_library_holds_the_truth_and_no_collective_input() -> None:
-    library = d.quad6dof_rotor_library()
+    library = rotor_library("quad6dof")
     assert len(library) == 699 and len(set(library)) == 699
     assert not any(set(n.split()) & {"u1", "u2", "u3", "u4"} for n in library)
     for vehicle in ("crazyflie", "pelican"):  # X and + frames

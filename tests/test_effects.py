@@ -460,3 +460,72 @@ def test_measured_rollouts_record_what_a_log_holds():
     assert turn.x[-1, 5] > np.pi and np.abs(np.diff(turn.x[:, 5])).max() < 0.1
     with pytest.raises(ValueError, match="record must be one of"):
         collect_rollouts("PlanarQuad-v0", policy, record="sensors")
+
+
+@pytest.mark.parametrize("mode", ["collective", "rotor_thrusts", "motor_speeds"])
+def test_rotor_commands_are_the_targets_the_rotor_states_follow(mode):
+    """info['rotor_commands']: with an action held, the rotor states relax toward it as
+    T_cmd + (T0 - T_cmd) exp(-dt / tau); the vector env gives the single env's, member by
+    member (zeros for a member being reset)."""
+    kw = dict(vehicle="crazyflie", action_mode=mode, substeps=5, effects={"rotor_dynamics": True})
+    env = gym.make("Quad6DOF-v0", **kw)
+    _, info = env.reset(seed=2)
+    action = env.action_space.sample()
+    *_, info = env.step(action)
+    t0, command = info["rotor_thrusts"], info["rotor_commands"]
+    lo, hi = CRAZYFLIE_6DOF.rotor_force_min, CRAZYFLIE_6DOF.rotor_force_max
+    assert np.all((command >= lo) & (command <= hi)) and np.ptp(command) > 1e-3
+    tau = CRAZYFLIE_6DOF.rotor_time_constant
+    for k in range(1, 6):
+        *_, info = env.step(action)
+        np.testing.assert_array_equal(info["rotor_commands"], command)
+        expected = command + (t0 - command) * np.exp(-k * 0.01 / tau)
+        np.testing.assert_allclose(info["rotor_thrusts"], expected, rtol=1e-7)
+    vec = gym.make_vec("Quad6DOF-v0", num_envs=2, vectorization_mode="vector_entry_point", **kw)
+    vec.reset(seed=2)
+    actions = np.stack([action, vec.single_action_space.sample()])
+    *_, vinfo = vec.step(actions)
+    single = gym.make("Quad6DOF-v0", **kw)
+    for i in range(2):
+        single.reset(seed=2)
+        *_, sinfo = single.step(actions[i])
+        np.testing.assert_allclose(vinfo["rotor_commands"][i], sinfo["rotor_commands"])
+    plain = gym.make("Quad6DOF-v0")
+    plain.reset(seed=0)
+    assert "rotor_commands" not in plain.step(np.array([3.0, 0, 0, 0]))[4]
+
+
+def test_rollouts_with_rotor_dynamics_record_the_rotors_and_identify_exactly():
+    """With rotor lag the collective input changes within each step; the rollouts record the
+    rotor thrusts as states and their commands as inputs, and the planar_rotors preset (the
+    library identify takes for such data) gives the exact model of a vehicle that is not the
+    paper's, lag included."""
+    from identification.experiments.synthetic import check_support
+    from identification.libraries import library_from_spec
+    from identification.rollouts import excitation_rollouts
+    from identification.selection import select_model
+
+    params = {"mass": 0.5, "Ixx": 1e-3, "rotor_time_constant": 0.03, "rotor_force_max": 4.0}
+    kw = {"params": params, "effects": ["rotor_dynamics"], "action_mode": "rotor_thrusts"}
+    trajs = excitation_rollouts("PlanarQuad-v0", episodes=3, seed=1, steps=600, env_kwargs=kw)
+    first = trajs[0]
+    assert first.state_names[-2:] == ("T1", "T2") and first.input_names == ("Tc1", "Tc2")
+    np.testing.assert_allclose(first.u.sum(axis=1)[:5], first.meta["commanded"][:5, 0])
+    lib = library_from_spec("planar_rotors", first.state_names, first.input_names)
+    model, _ = select_model(trajs, lib, n_models=5, seed=0)
+    arm = PAPER_PLANAR.arm_length
+    truth = {
+        "y": {"y_dot": 1.0},
+        "z": {"z_dot": 1.0},
+        "phi": {"phi_dot": 1.0},
+        "y_dot": {"T1 sin(phi)": -2.0, "T2 sin(phi)": -2.0},
+        "z_dot": {"1": -PAPER_PLANAR.gravity, "T1 cos(phi)": 2.0, "T2 cos(phi)": 2.0},
+        "phi_dot": {"T1": -arm / 1e-3, "T2": arm / 1e-3},
+        "T1": {"T1": -1 / 0.03, "Tc1": 1 / 0.03},
+        "T2": {"T2": -1 / 0.03, "Tc2": 1 / 0.03},
+    }
+    check = check_support(model, truth)
+    assert check.exact_support, (check.missed, check.spurious)
+    assert check.max_rel_error < 1e-6
+    with pytest.raises(ValueError, match="rotor-thrust states .* has no surrogate env"):
+        gym.make("PlanarQuadSINDy-v0", model=model)

@@ -43,7 +43,7 @@ from identification.libraries import (
     planar_drag_library,
     planar_library,
     quad6dof_drag_library,
-    quad6dof_library,
+    rotor_library,
 )
 from identification.model import IdentifiedModel
 from identification.rollouts import excitation_rollouts
@@ -856,27 +856,6 @@ def quad6dof_effects_truth(
     }
 
 
-def quad6dof_rotor_library() -> list[str]:
-    """The 6-DOF preset library with the rotor thrusts and commands in the inputs' place.
-
-    Every term of :func:`identification.libraries.quad6dof_library` that holds an input
-    (u1..u4) is replaced by the same trig product times each of T1..T4 and Tc1..Tc4; the
-    rest is kept: 339 + 45 x 8 = 699 terms, the same candidates per variable as the preset.
-    """
-    import re
-
-    variables = (*QUAD6DOF_STATE_NAMES, *ROTOR_STATES_6DOF, *ROTOR_INPUTS_6DOF)
-    names: list[str] = []
-    for name in quad6dof_library():
-        held = re.findall(r"\bu[1-4]\b", name)
-        if not held:
-            names.append(name)
-        elif held == ["u1"]:
-            for rotor in (*ROTOR_STATES_6DOF, *ROTOR_INPUTS_6DOF):
-                names.append(re.sub(r"\bu1\b", rotor, name))
-    return list(dict.fromkeys(term_name(parse_term(n, variables)) for n in names))
-
-
 def drag6_study(
     vehicle: str | Quad6DOFParams = "crazyflie",
     episodes: int = 4,
@@ -927,7 +906,7 @@ def rotor6_study(
     flights = quad6dof_flights(params, episodes, steps, seed, noise=0.05, rotor_dynamics=True)
     kwargs: dict[str, Any] = {} if windows is None else {"windows": tuple(windows)}
     start = time.perf_counter()
-    model, _ = select_model(flights.observed, quad6dof_rotor_library(), n_models=n_models,
+    model, _ = select_model(flights.observed, rotor_library("quad6dof"), n_models=n_models,
                             seed=seed, **kwargs)  # fmt: skip
     seconds = time.perf_counter() - start
     tau_found = {}

@@ -478,6 +478,22 @@ class _EnvCore:
             action = np.clip(phys, self._u_low, self._u_high)
         return action.astype(self._single_act_space.dtype)
 
+    def _rotor_commands(self, A: FloatArray, active: Any = None) -> FloatArray:
+        """The thrust each rotor was commanded by actions ``A`` (b, k), after its limits.
+
+        With rotor dynamics these are the inputs of the thrust states, held over the step
+        (``info['rotor_commands']``); members not stepped (``active`` false) get zeros.
+        """
+        thrust = np.zeros((A.shape[0], self._k))
+        A = np.ascontiguousarray(A, dtype=np.float64)
+        physics.rotor_command_batch(
+            A, self._P, self._consts, self._mix, self._unmix, self._box, self._frac, thrust,
+            self._work_array,
+        )  # fmt: skip
+        if active is not None:
+            thrust[~active] = 0.0
+        return thrust
+
     def _work(self, b: int) -> FloatArray:
         """Scratch array of the kernels (see ``kernel_template.step``)."""
         width = max(self._n_ext, self._k, self.vehicle.ndim, self._u_low.size)
@@ -547,7 +563,8 @@ class QuadrotorEnv(_EnvCore, gym.Env):
     Info keys: ``state`` (rigid-body state), ``reference``, ``action`` (the collective input
     the rotors applied; with rotor dynamics, at the end of the step), ``commanded`` (the
     collective input commanded, before the rotor limits), ``rotor_thrusts`` (with rotor
-    dynamics: the rotor thrust states [N]), ``time``.
+    dynamics: the rotor thrust states [N]), ``rotor_commands`` (with rotor dynamics, after a
+    step: the thrust each rotor was commanded over it, after its limits [N]), ``time``.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 100}
@@ -635,6 +652,8 @@ class QuadrotorEnv(_EnvCore, gym.Env):
             if self.render_mode == "human":
                 self.render()
         info = self._info(ref, u[0], u_cmd[0])
+        if self._rotor_state:
+            info["rotor_commands"] = self._rotor_commands(a.reshape(1, -1))[0]
         info["out_of_bounds"] = terminated
         if self._range is not None:
             info["outside_training"] = float(self._outside(info["state"], u[0]))
@@ -877,6 +896,8 @@ class QuadrotorVectorEnv(_EnvCore, VectorEnv):
             obs = self._pending.popleft()
         self._needs_reset = terminated | truncated
         info = self._info_all(refs, u, u_cmd)
+        if self._rotor_state:
+            info["rotor_commands"] = self._rotor_commands(a, active)
         info["out_of_bounds"] = terminated.copy()  # as the single env's step info
         if self._range is not None:
             info["outside_training"] = np.where(resetting, 0.0, self._outside(info["state"], u))
