@@ -131,9 +131,10 @@ def _collect(config: MBRLConfig, policy: Any, steps: int, seed: int) -> list[Tra
     """Episodes of ``policy`` on the ground truth until ``steps`` transitions are recorded."""
     trajs, total, episode = [], 0, 0
     while total < steps:
+        # the surrogate steps the rigid body: a rotor lag is model error here
         new = collect_rollouts(
             config.env_id, policy, 1, seed + episode, max_steps=max(steps - total, 10),
-            env_kwargs=config.truth_kwargs, record=config.data,
+            env_kwargs=config.truth_kwargs, record=config.data, rotor_states=False,
         )  # fmt: skip
         episode += 1
         for traj in new:

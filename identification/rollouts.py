@@ -44,6 +44,7 @@ def collect_rollouts(
     env_kwargs: dict[str, Any] | None = None,
     reset_options: Callable[[int, np.random.Generator], dict[str, Any]] | None = None,
     record: str = "truth",
+    rotor_states: bool | None = None,
 ) -> list[Trajectory]:
     """Runs a policy in a registered env and records states and inputs.
 
@@ -59,6 +60,10 @@ def collect_rollouts(
         record: ``truth`` (the true state and the applied input; with rotor dynamics the
             rotor thrusts too, and their commands as the inputs) or ``measured`` (the
             observed state and the commanded input: what a real log holds).
+        rotor_states: Record the rotor thrusts ``T1..Tk`` and their commands ``Tc1..Tck``
+            (default: where the env has rotor dynamics and ``record`` is ``truth``). False
+            records the collective input (with rotor lag: the one applied at the end of
+            each step), the variables a surrogate env steps.
 
     Returns:
         One trajectory per episode (at least 3 samples each).
@@ -73,7 +78,13 @@ def collect_rollouts(
     vehicle = base.vehicle
     n = len(vehicle.state_names)
     state_names, input_names = vehicle.state_names, vehicle.input_names
-    rotors = bool(base.effects.rotor_dynamics) and record == "truth"
+    lagging = bool(base.effects.rotor_dynamics) and record == "truth"
+    if rotor_states and not lagging:
+        raise ValueError(
+            "rotor_states=True needs an env with rotor dynamics (effects=['rotor_dynamics']) "
+            "and record='truth'"
+        )
+    rotors = lagging if rotor_states is None else rotor_states
     if rotors:  # the rotors' thrusts are states; their commands, held over a step, the inputs
         k = base.params.mixer.shape[1]
         state_names = (*state_names, *(f"T{i + 1}" for i in range(k)))
@@ -138,6 +149,7 @@ def excitation_rollouts(
     env_kwargs: dict[str, Any] | None = None,
     record: str = "truth",
     max_tilt: float | None = None,
+    rotor_states: bool | None = None,
 ) -> list[Trajectory]:
     """The vehicle's own controller tracking random waypoints plus exploration noise.
 
@@ -157,6 +169,7 @@ def excitation_rollouts(
         max_tilt: Largest tilt the controller commands [rad]; unlimited by default (the
             waypoints can command several radians: a Pelican fell after 90 rows). A flight
             that ends early is named in a warning.
+        rotor_states: See :func:`collect_rollouts`.
 
     Returns:
         The recorded trajectories.
@@ -197,6 +210,7 @@ def excitation_rollouts(
             env_kwargs=env_kwargs,
             reset_options=options,
             record=record,
+            rotor_states=rotor_states,
         )
     finally:
         probe.close()

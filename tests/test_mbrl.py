@@ -185,6 +185,24 @@ def test_the_loop_can_identify_from_what_a_real_log_holds(tmp_path):
         MBRLConfig(data="sensors")
 
 
+def test_the_loop_records_the_surrogates_variables_when_the_truth_has_rotor_lag():
+    """Rollouts of an env with rotor dynamics record the rotor states by default; the loop's
+    surrogate steps the rigid body under the collective input, so it records that."""
+    from agents.mbrl import _collect
+    from agents.policies import OrnsteinUhlenbeckPolicy
+    from identification.rollouts import collect_rollouts
+
+    config = dataclasses.replace(TINY, env_options={"effects": ["rotor_dynamics"]})
+    policy = OrnsteinUhlenbeckPolicy(gym.make("PlanarQuad-v0", **config.truth_kwargs), 0)
+    logged = _collect(config, policy, 50, 0)
+    assert logged[0].input_names == ("u1", "u2") and "T1" not in logged[0].state_names
+    default = collect_rollouts("PlanarQuad-v0", policy, 1, max_steps=20,
+                               env_kwargs=config.truth_kwargs)[0]  # fmt: skip
+    assert default.input_names == ("Tc1", "Tc2") and default.state_names[-1] == "T2"
+    with pytest.raises(ValueError, match="rotor_states=True needs an env with rotor dynamics"):
+        collect_rollouts("PlanarQuad-v0", policy, 1, max_steps=5, rotor_states=True)
+
+
 @pytest.mark.parametrize(
     "args,fragments",
     [
