@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import io
 import re
+import zipfile
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -1267,6 +1269,22 @@ def read_table(
                           auto)  # fmt: skip
 
 
+_NPZ_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error)
+"""What reading a damaged or foreign .npz raises (a truncated zip, a bad member)."""
+
+
+def _npz_arrays(path: str | Path) -> dict[str, np.ndarray]:
+    """Every array of an NPZ file, read; anything else is a one-line ValueError."""
+    try:
+        data = np.load(path, allow_pickle=False)
+        if not isinstance(data, np.lib.npyio.NpzFile):  # a .npy array under an .npz name
+            raise ValueError("a single NumPy array, not an NPZ archive of named arrays")
+        with data:
+            return {name: data[name] for name in data.files}
+    except _NPZ_ERRORS as exc:
+        raise ValueError(f"{path}: cannot read the NPZ file ({exc})") from None
+
+
 def is_npz_archive(path: str | Path) -> bool:
     """Whether ``path`` is an NPZ archive of trajectories written by :func:`save_npz`."""
     if Path(path).suffix.lower() != ".npz" or not Path(path).exists():
@@ -1274,17 +1292,13 @@ def is_npz_archive(path: str | Path) -> bool:
     try:
         with np.load(path, allow_pickle=False) as data:
             return "count" in data.files
-    except (OSError, ValueError):
+    except (*_NPZ_ERRORS, TypeError, AttributeError):  # (a .npy array has no files)
         return False
 
 
 def _read_npz_table(path: Path, columns: Sequence[str] | None) -> dict[str, np.ndarray]:
     """An NPZ log: one 1-D numeric array per column, all of the same length."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in data.files}
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: cannot read the NPZ file ({exc})") from None
+    arrays = _npz_arrays(path)
     _check_columns(path, list(arrays), columns)
     layout = (
         "an NPZ log holds one 1-D array per column (t, states, inputs), or the trajectory "
@@ -1380,21 +1394,28 @@ def save_npz(path: str | Path, trajs: Sequence[Trajectory]) -> Path:
 
 def load_npz(path: str | Path) -> list[Trajectory]:
     """Loads trajectories saved by :func:`save_npz`."""
+    data = _npz_arrays(path)
     try:
-        with np.load(path, allow_pickle=False) as data:
-            count = int(data["count"])
-            return [
-                Trajectory(
-                    data[f"t_{i}"],
-                    data[f"x_{i}"],
-                    data[f"u_{i}"],
-                    tuple(data[f"state_names_{i}"]),
-                    tuple(data[f"input_names_{i}"]),
-                )  # fmt: skip
-                for i in range(count)
-            ]
+        count = int(data["count"])
+    except KeyError:
+        raise ValueError(f"{path} is not a quad-sindy trajectory archive (no 'count')") from None
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: its 'count' is not a whole number ({data['count']})") from None
+    try:
+        return [
+            Trajectory(
+                data[f"t_{i}"],
+                data[f"x_{i}"],
+                data[f"u_{i}"],
+                tuple(data[f"state_names_{i}"]),
+                tuple(data[f"input_names_{i}"]),
+            )  # fmt: skip
+            for i in range(count)
+        ]
     except KeyError as exc:
-        raise ValueError(f"{path} is not a quad-sindy trajectory archive ({exc.args[0]})") from None
+        raise ValueError(
+            f"{path} is not a quad-sindy trajectory archive (no array {exc.args[0]!r})"
+        ) from None
 
 
 def load_data(

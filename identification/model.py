@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -332,16 +332,30 @@ class IdentifiedModel:
             raise ValueError(
                 f"{source}: meta must be a JSON object, got {type(data['meta']).__name__}"
             )
+        for key in ("state_names", "input_names", "feature_names"):
+            names = data[key]
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise ValueError(f"{source}: {key} must be a list of names (strings)")
+        _check_meta(dict(data.get("meta") or {}), data["input_names"], source)
         try:
             coefficients = np.array(data["coefficients"], dtype=np.float64)
         except (TypeError, ValueError):
             raise ValueError(f"{source}: coefficients must be a numeric matrix") from None
+        extras = {}
+        for key in ("coefficient_std", "inclusion_probability"):
+            try:
+                extras[key] = _optional_array(data.get(key))
+            except (TypeError, ValueError):
+                raise ValueError(f"{source}: {key} must be a numeric matrix or null") from None
+            shape = None if extras[key] is None else extras[key].shape
+            if shape is not None and shape != coefficients.shape:
+                raise ValueError(f"{source}: {key} has shape {shape}, the coefficients "
+                                 f"{coefficients.shape}")  # fmt: skip
         try:
             return cls(
                 data["feature_names"], coefficients, tuple(data["state_names"]),
                 tuple(data["input_names"]), data.get("system"), dict(data.get("meta") or {}),
-                _optional_array(data.get("coefficient_std")),
-                _optional_array(data.get("inclusion_probability")),
+                extras["coefficient_std"], extras["inclusion_probability"],
             )  # fmt: skip
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{source}: {exc}") from None
@@ -369,7 +383,25 @@ def load_model(path: str | Path) -> IdentifiedModel:
         raise ValueError(f"{path} is not a model file: not text (binary?)") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: malformed JSON ({exc})") from None
+    except RecursionError:
+        raise ValueError(f"{path} is not a model file: JSON nested too deeply") from None
     return IdentifiedModel.from_dict(data, source=str(path))
+
+
+def _check_meta(meta: dict[str, Any], inputs: Sequence[str], source: str) -> None:
+    """Refuses, in one line, a damaged entry of the meta fields that commands read."""
+    measured = meta.get("measured_inputs", [])
+    if not isinstance(measured, list) or not all(m in inputs for m in measured):
+        raise ValueError(f"{source}: meta.measured_inputs must list some of the inputs "
+                         f"{list(inputs)}, got {measured!r}")  # fmt: skip
+    for key in ("window", "input_shift"):
+        value = meta.get(key, 1)
+        low = 1 if key == "window" else -(10**6)
+        if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 10**6:
+            raise ValueError(f"{source}: meta.{key} must be a whole number from {low} to "
+                             f"{10**6}, got {value!r}")  # fmt: skip
+    if not isinstance(meta.get("time_column", "t"), str):
+        raise ValueError(f"{source}: meta.time_column must be a column name (a string)")
 
 
 def _is_range(bounds: Any) -> bool:

@@ -759,7 +759,8 @@ def score(
         typer.echo(f"data: {cleaning.summary()}")
     window = loaded.meta.get("window", 1)
     window = window if isinstance(window, int) and not isinstance(window, bool) else 1
-    names, window = list(loaded.feature_names), max(window, 1)
+    # (the notes read the model's window; a log shorter than it gets the longest that fits)
+    names, window = list(loaded.feature_names), max(min(window, max(map(len, trajs)) - 1), 1)
     ratio = long_run_ratio(long_enough(trajs, window), names, loaded.coefficients, window)
     late = input_shift_note(trajs, names, window, loaded.coefficients, ratio,
                             command="score again")  # fmt: skip
@@ -853,7 +854,7 @@ def _schema_of(path: Path) -> str | None:
 
     try:
         data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         return None
     return data.get("schema") if isinstance(data, dict) else None
 
@@ -1111,7 +1112,7 @@ def _run_record(agent: Path) -> dict | None:
     path = agent.with_name("run.json")
     try:
         record = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
         return None
     return record if isinstance(record, dict) else None
 

@@ -181,6 +181,15 @@ def test_timestamps_and_npz_columns_are_read_exactly(other_clean, tmp_path):
     np.savez(tmp_path / "matrix.npz", t=tr.t, X=tr.x, U=tr.u)
     with pytest.raises(ValueError, match="one 1-D array per column.*'X' has shape"):
         load_data([tmp_path / "matrix.npz"], system="planar")
+    # a .npy under an .npz name and a truncated archive: one line each, no traceback
+    np.save(tmp_path / "array.npy", tr.x)
+    (tmp_path / "array.npz").write_bytes((tmp_path / "array.npy").read_bytes())
+    with pytest.raises(ValueError, match="a single NumPy array, not an NPZ archive"):
+        load_data([tmp_path / "array.npz"], system="planar")
+    whole = (tmp_path / "log.npz").read_bytes()
+    (tmp_path / "cut.npz").write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(ValueError, match="cut.npz: cannot read the NPZ file"):
+        load_data([tmp_path / "cut.npz"], system="planar")
 
 
 def test_a_measured_attitude_as_input_is_interpolated_within_the_step(other_clean, tmp_path):

@@ -346,6 +346,12 @@ def test_model_round_trip_and_pickle(tmp_path, case_c):
             "missing field",
         ),
         (lambda d: json.dumps({**d, "system": "quad6dof"}), "do not match"),
+        (lambda d: "[" * 100_000 + "]" * 100_000, "nested too deeply"),
+        (lambda d: json.dumps({**d, "feature_names": [1] + d["feature_names"][1:]}), "strings"),
+        (lambda d: json.dumps({**d, "coefficient_std": [[0.0]]}), r"coefficient_std has shape"),
+        (lambda d: json.dumps({**d, "meta": {"window": 10**9}}), "meta.window must be"),
+        (lambda d: json.dumps({**d, "meta": {"measured_inputs": 5}}), "meta.measured_inputs"),
+        (lambda d: json.dumps({**d, "meta": {"measured_inputs": ["v9"]}}), "some of the inputs"),
     ],
 )
 def test_malformed_model_files_get_clear_errors(tmp_path, edit, message):
