@@ -255,13 +255,16 @@ def logged_resolution(values: np.ndarray) -> float:
     big = float(np.abs(v).max()) if v.size else 0.0
     if not big:
         return float(np.spacing(1.0))
-    single = float(np.spacing(np.float32(big)))
     step = float(np.spacing(big))
-    for k in range(13):
-        scaled = v * 10.0**k
-        if np.max(np.abs(scaled - np.round(scaled))) <= 16 * np.spacing(big * 10.0**k):
-            step = 10.0**-k
-            break
+    with np.errstate(over="ignore", invalid="ignore"):  # (a stamp of 1e300 in a fuzzed log)
+        for k in range(13):
+            scaled = v * 10.0**k
+            if np.max(np.abs(scaled - np.round(scaled))) <= 16 * np.spacing(big * 10.0**k):
+                step = 10.0**-k
+                break
+    if big >= float(np.finfo(np.float32).max):  # beyond float32: not float32 values
+        return step
+    single = float(np.spacing(np.float32(big)))
     # float32 values, printed to k decimals or not, sit within half a step of a float32
     if np.max(np.abs(v - v.astype(np.float32))) <= 0.5 * step + 4 * np.spacing(big):
         return max(step, single)

@@ -433,6 +433,8 @@ def state_shift_note(
         # stage points couple the others only through the model's own error)
         mine = np.array([i == s or states[s] in used for i, used in zip(rows, reads,
                                                                          strict=True)])  # fmt: skip
+        if not mine.any():  # no equation reads this column (its own is empty)
+            continue
         best: tuple[float, int, int, np.ndarray] | None = None
         for shift in INPUT_SHIFTS:
             rss, sigma2 = residuals([_state_taken_later(t, s, shift, margin) for t in usable])

@@ -1,5 +1,7 @@
 """Reading and cleaning logs (identification.data): formats, stamps, gaps, stale rows, units."""
 
+import warnings
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -42,6 +44,9 @@ def test_logged_resolution_reads_decimals_float32_and_float64():
     assert logged_resolution(v) == np.spacing(np.abs(v).max())
     tiny = 1e-7 * v  # kN m of a 28 g vehicle: not integers because they round to 0
     assert logged_resolution(tiny) == np.spacing(np.abs(tiny).max())
+    with warnings.catch_warnings():  # beyond float32 (a fuzzed stamp): no overflow warning
+        warnings.simplefilter("error")
+        assert 0 < logged_resolution(np.array([0.01, 0.02, 1e300])) < np.inf
 
 
 def test_a_clock_that_never_runs_is_named(other_clean):

@@ -1,6 +1,7 @@
 """Notes on the log and the fit (identification.diagnostics): lags, offsets, outliers, units."""
 
 import dataclasses
+import warnings
 
 import numpy as np
 import pytest
@@ -399,6 +400,11 @@ def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inpu
     ratio = long_run_ratio(lagged, names, xi, w)
     assert input_shift_note(lagged, names, w, xi, ratio) is None
     assert "y_dot taken 2 row(s) later" in state_shift_note(lagged, names, w, xi, ratio)
+    only_z = np.zeros_like(xi)  # no equation reads y (a fuzzed log's empty equations)
+    only_z[1, names.index("z_dot")] = 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (it averaged an empty selection: "Mean of empty slice")
+        state_shift_note(lagged, names, w, only_z, ratio)
     model.save(tmp_path / "m.json")
     paths = [str(write_trajectory_csv(tmp_path / f"a{i}.csv", t))
              for i, t in enumerate(other_clean)]  # fmt: skip
