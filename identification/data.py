@@ -318,6 +318,11 @@ def validate(traj: Trajectory) -> None:
         )
 
 
+OVERFLOWING = 1e150
+"""A state or input beyond this magnitude is not a number a model can use (its square, a
+library term, overflows float64): :func:`clean` drops its row as non-finite."""
+
+
 class ShortLog(ValueError):
     """A log with no segment long enough to keep (:func:`clean`)."""
 
@@ -329,7 +334,8 @@ class CleanReport:
     Attributes:
         rows_in: Rows given.
         stale_rows: Rows dropped because they repeat the previous row's states (or time).
-        nonfinite_rows: Rows dropped because a value is NaN or infinite.
+        nonfinite_rows: Rows dropped because a value is NaN, infinite or beyond
+            :data:`OVERFLOWING` (a fuzzed 1e300: the library's products overflow).
         outlier_rows: Rows dropped as outliers (robust z-score of the state).
         input_spikes: Rows dropped because an input spikes far outside its range for up to
             3 rows (a logging glitch: a motor speed of 1e5 rad/s): :func:`_input_spikes`.
@@ -559,6 +565,8 @@ def clean(
     t = np.asarray(t, dtype=np.float64)
     x = np.array(x, dtype=np.float64).reshape(t.size, -1)  # a copy: angles are unwrapped
     u = np.array(u, dtype=np.float64).reshape(t.size, -1)  # a copy: empty cells are held
+    with np.errstate(invalid="ignore"):  # values whose products overflow count as non-finite
+        x[np.abs(x) > OVERFLOWING], u[np.abs(u) > OVERFLOWING] = np.nan, np.nan
     restarts = _time_restarts(t, gap_factor)
     if restarts.size:  # logs appended in one file: clean each on its own
         options = dict(gap_factor=gap_factor, outlier_z=outlier_z, min_rows=min_rows,
@@ -579,8 +587,8 @@ def clean(
     for values, names in ((x, state_names), (u, input_names)):
         empty = [n for j, n in enumerate(names) if t.size and not np.isfinite(values[:, j]).any()]
         if empty:
-            raise ValueError(f"column(s) {empty} hold no numbers (every cell empty or "
-                             "not finite)")  # fmt: skip
+            raise ValueError(f"column(s) {empty} hold no numbers (every cell empty, not "
+                             f"finite or beyond {OVERFLOWING:g})")  # fmt: skip
     stamps = np.unique(t[np.isfinite(t)])
     if t.size > 1 and stamps.size < 2:  # a judge's all-zero column was told "no segment"
         held = f"every stamp is {stamps[0]:g}" if stamps.size else "no stamp is a number"

@@ -272,12 +272,14 @@ def _csv_text(tr: Trajectory, delimiter: str = ",", header: list[str] | None = N
 
 
 @pytest.mark.parametrize(
-    "variant", ["bom", "quoted", "semicolon", "tab", "empty_cells", "text_column", "iso_time"]
+    "variant",
+    ["bom", "quoted", "semicolon", "tab", "empty_cells", "overflowing", "text_column", "iso_time"],
 )
 def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
     """Forms a new user's real logs came in, each refused before: Excel's byte-order mark,
     a quoted header, ';' or tab delimiters, empty cells (pandas' NaN), an unused text column,
-    ISO timestamps."""
+    ISO timestamps; a cell of 1e300 (a fuzz trial's: overflow warnings, then a refusal as
+    collinear) is a lost value like an empty cell."""
     tr = other_clean[0]
     text = _csv_text(tr, {"semicolon": ";", "tab": "\t"}.get(variant, ","))
     lines = text.split("\n")
@@ -285,9 +287,9 @@ def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
         text = "\ufeff" + text
     elif variant == "quoted":
         text = "\n".join([",".join(f'"{c}"' for c in lines[0].split(","))] + lines[1:])
-    elif variant == "empty_cells":
+    elif variant in ("empty_cells", "overflowing"):
         cells = lines[101].split(",")
-        cells[2] = ""
+        cells[2] = "" if variant == "empty_cells" else "1e300"
         text = "\n".join(lines[:101] + [",".join(cells)] + lines[102:])
     elif variant == "text_column":
         text = "\n".join([lines[0] + ",mode"] + [ln + ",hover" for ln in lines[1:]])
@@ -304,7 +306,7 @@ def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
     segs, report = load_data([path], system="planar")
     assert segs[0].state_names == PS and report.rows_out == len(tr)
     assert np.allclose(np.concatenate([s.t for s in segs])[:50], tr.t[:50], rtol=0, atol=1e-9)
-    if variant == "empty_cells":  # a lost state: bridged
+    if variant in ("empty_cells", "overflowing"):  # a lost state: bridged
         assert (report.nonfinite_rows, report.bridged) == (1, 1)
     else:
         assert np.array_equal(segs[0].x, tr.x)
