@@ -215,6 +215,10 @@ FLIGHTS_IGNORE = {
 """Vehicle parameters of effects that ``flights`` does not fly (it is the rigid body)."""
 
 
+MAX_FLIGHT_ROWS = 10**7
+"""The most rows ``flights`` writes in one run (about 1 GB of CSV; a fuzzed 1e10 asked 75 GB)."""
+
+
 @app.command()
 def flights(
     out: Annotated[Path, typer.Option(help="folder for the flights (flight_K.csv)")],
@@ -253,6 +257,9 @@ def flights(
         _fail(f"--system is planar or quad6dof, not {system!r}")
     if (count is not None and count < 1) or steps < 20:
         _fail(f"--count must be positive and --steps at least 20, got {count} and {steps}")
+    if (count or 4) * steps > MAX_FLIGHT_ROWS:
+        _fail(f"--count x --steps must be at most {MAX_FLIGHT_ROWS:,} rows, got {count or 4} x "
+              f"{steps:,} (the docs' figures fly 3 or 4 flights of 1000 rows)")  # fmt: skip
     _finite("--dt", dt)
     _finite("--tilt", tilt)
     for flag, value in (("--noise", noise), ("--excitation", excitation), ("--drag", drag)):

@@ -77,6 +77,7 @@ def ppo_zip(tmp_path_factory):
         (["flights", "--out", "{tmp}/f", "--drag", "-1"], ["--drag must be a finite number"]),
         (["flights", "--out", "{tmp}/f", "--tilt", "-1"], ["--tilt must be a finite number"]),
         (["flights", "--out", "{tmp}/f", "--steps", "40", "--dt", "5"], ["tumbled"]),
+        (["flights", "--out", "{tmp}/f", "--steps", "10000000000"], ["at most 10,000,000 rows"]),
         (
             ["compare", "--model", "{file}", "--env", "CartPole-v1", "--out", "{tmp}/c"],
             ["not a quadrotor env"],
