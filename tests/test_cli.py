@@ -145,6 +145,17 @@ def test_identify_picks_the_preset_of_a_vehicle_whose_variables_the_data_name(
     assert "the planar vehicle's preset" in out
     model = load_model(tmp_path / "m.json")
     assert "sin(phi) u1" in model.feature_names and model.n_terms == 7
+    # the same logs with unrelated columns: the preset on its own columns, the others named
+    rng = np.random.default_rng(0)
+    for path in paths:
+        lines = open(path).read().splitlines()
+        rows = [f"{row},{12 + rng.normal(0, 0.1)},{k}" for k, row in enumerate(lines[1:])]
+        open(path, "w").write("\n".join([lines[0] + ",battery_v,counter", *rows]))
+    code, out, err = run_cli(monkeypatch, capsys, "identify", *paths, "--out",
+                             str(tmp_path / "m2.json"))  # fmt: skip
+    assert code in (0, None), err
+    assert "the other column(s) battery_v, counter are left out" in out
+    assert load_model(tmp_path / "m2.json").n_terms == 7
 
 
 def test_identify_takes_the_rotor_preset_for_rollouts_with_rotor_dynamics(
