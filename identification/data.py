@@ -731,9 +731,16 @@ def clean(
         dev = np.abs(seg.steps / own - 1.0).max() if own else 0.0
         report.jitter = max(report.jitter, float(dev))
     if not segments:
+        causes = [f"{report.gaps} gaps"]
+        causes += [f"{report.cuts} runs of dropped rows"] if report.cuts else []
+        causes += [f"{report.skipped} rows the logger lost"] if report.skipped else []
+        repeats = int((late & np.isfinite(t)).sum())
+        if repeats:  # (a trial's log with every stamp written twice: nothing said of it)
+            causes.append(f"{repeats} rows stamped at or before the row before, dropped: "
+                          "stamps coarser than the rows, or rows out of order")  # fmt: skip
         raise ShortLog(
             f"no segment of at least {min_rows} clean rows (log has {t.size} rows with "
-            f"{report.gaps} gaps): record longer uninterrupted stretches"
+            f"{', '.join(causes)}): record longer uninterrupted stretches"
         )
     report.segments = len(segments)
     report.rows_out = int(sum(len(s) for s in segments))

@@ -447,7 +447,8 @@ def test_float32_time_stamps_are_read_as_the_regular_clock_they_round(other_clea
 def test_rows_the_logger_lost_split_the_log_and_a_jittery_clock_does_not(other_clean):
     """A clean log with 1 % of its rows deleted (a trial's: each lost row's input unknown,
     the logged one held over two periods; `phi_dot'` 9 % off, reported as 100 % jitter) is
-    split at each lost row and the model is exact; +-20 % jitter splits nothing."""
+    split at each lost row and the model is exact; +-20 % jitter splits nothing. A log with
+    every stamp written twice is refused naming the repeated stamps."""
     rng = np.random.default_rng(3)
     segs, lost = [], 0
     for tr in other_clean:
@@ -462,6 +463,9 @@ def test_rows_the_logger_lost_split_the_log_and_a_jittery_clock_does_not(other_c
     check = check_support(model, truth_planar(OTHER_PLANAR))
     assert check.exact_support and check.max_rel_error < 1e-6
     tr = other_clean[0]
+    twice = np.repeat(tr.t[::2], 2)[: len(tr)]  # every stamp written twice, the rows differ
+    with pytest.raises(ValueError, match="rows stamped at or before the row before"):
+        clean(twice, tr.x, tr.u, PS, PI)
     jittery = tr.t[0] + np.concatenate([[0.0], np.cumsum(rng.uniform(0.008, 0.012, len(tr) - 1))])
     parts, report = clean(jittery, tr.x, tr.u, PS, PI)
     assert len(parts) == 1 and report.skipped == 0
