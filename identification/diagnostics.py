@@ -999,9 +999,18 @@ def _unit_mismatch(trajs: Sequence[Trajectory], angles: set[str] = frozenset()) 
         if said:
             where = paths[i] if len(paths) > 2 else f"{paths[1]} against {paths[0]}"
             against = "the other files" if len(paths) > 2 else "it"
-            notes.append(
-                f"{where}: {'; '.join(said)}, against {against}: logged in another "
-                "unit (mm for m, g for N, degrees for radians)? Convert it, or leave "
-                "the file out"
-            )
-    return notes
+            notes.append((where, said, against))
+    if len(paths) > 2 and 2 * len(notes) > len(paths):  # no majority to be the usual unit
+        # (a trial pooled a 27 g and a 9 kg vehicle's files: each was named as in another
+        # unit, and the pooling only 20 warnings later)
+        listed = "; ".join(f"{where}: {', '.join(said)}" for where, said, _ in notes)
+        return [
+            f"{len(notes)} of {len(paths)} files differ from the files' median ({listed}): logs "
+            "of different vehicles pooled (masses, inertias), or in several units? Identify "
+            "each vehicle's logs on their own, or convert them"
+        ]
+    return [
+        f"{where}: {'; '.join(said)}, against {against}: logged in another unit (mm for m, g "
+        "for N, degrees for radians)? Convert it, or leave the file out"
+        for where, said, against in notes
+    ]

@@ -233,6 +233,15 @@ def test_a_file_in_another_unit_among_the_others_is_named(tmp_path, other_clean)
     trajs, _ = load_data([*paths[:3], str(write_trajectory_csv(tmp_path / "far.csv", away))],
                          system="planar", angles=["phi"])  # fmt: skip
     assert not [w for w in data_warnings(trajs) if "another unit" in w]
+    # two heavy and two light vehicles' files: no majority unit, one note of the pooling
+    heavy = Trajectory(tr.t, tr.x, tr.u * 20, PS, PI)
+    light = Trajectory(tr.t, tr.x, tr.u / 20, PS, PI)
+    pooled = [str(write_trajectory_csv(tmp_path / f"p{k}.csv", t))
+              for k, t in enumerate([heavy, light, heavy, light])]  # fmt: skip
+    trajs, _ = load_data(pooled, system="planar", angles=["phi"])
+    named = [w for w in data_warnings(trajs) if "files differ" in w or "another unit" in w]
+    assert len(named) == 1 and named[0].startswith("4 of 4 files differ"), named
+    assert "different vehicles pooled" in named[0]
 
 
 def test_a_residual_that_does_not_shrink_with_the_window_is_reported(other_clean):
