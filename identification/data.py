@@ -1106,7 +1106,10 @@ def _read_csv_columns(
         ) from None
     if not first:
         raise ValueError(f"{path} is empty")
-    delimiter = next((d for d in (",", ";", "\t") if d in first), ",")
+    delimiter = next((d for d in (",", ";", "\t") if d in first), None)
+    if delimiter is None:  # one column, or separated by single spaces (a fuzz trial's file)
+        spaced = len(first.split(" ")) == len(first.split()) > 1
+        delimiter = " " if spaced else ","
     fields = [f.strip().strip('"').strip("'") for f in first.split(delimiter)]
     has_header = not all(_is_number(f) for f in fields)
     if columns is None and not has_header:
@@ -1156,8 +1159,8 @@ def _numbers_in_text(column: Any) -> tuple[np.ndarray, list[str]]:
         text = "" if cell is None else str(cell).strip()
         if not text:
             continue
-        try:
-            values[k] = float(text)
+        try:  # (a typeset minus sign, U+2212, as a spreadsheet may write it)
+            values[k] = float(text.replace("\u2212", "-"))
         except ValueError:
             bad.append(text)
     return values, bad
@@ -1196,6 +1199,8 @@ def _float_columns(
         if pa.types.is_timestamp(column.type):  # seconds since the earliest, exact in int64
             ns = column.cast(pa.timestamp("ns")).cast(pa.int64())
             column, scale = pc.subtract(ns, pc.min(ns)), 1e-9
+        elif pa.types.is_duration(column.type):  # (a fuzzed duration[ns] was read as seconds)
+            column, scale = column.cast(pa.duration("ns")).cast(pa.int64()), 1e-9
         elif pa.types.is_null(column.type):  # every cell empty
             out[name] = np.full(len(column), np.nan)
             continue
@@ -1211,17 +1216,34 @@ def _float_columns(
             values = column.to_numpy(zero_copy_only=False).astype(np.float64)
         except (TypeError, ValueError, pa.ArrowInvalid):
             if not pa.types.is_string(column.type) and not pa.types.is_large_string(column.type):
-                if name in required:
-                    raise ValueError(f"{path}: column {name!r} is not numeric (of type "
-                                     f"{column.type})") from None  # fmt: skip
+                if name in required or auto:  # (auto: a list column `u1` left out silently)
+                    raise ValueError(
+                        f"{path}: column {name!r} is not numeric (of type {column.type})"
+                        + (
+                            ": name the states and inputs (--states, --inputs) to leave it out"
+                            if auto and name not in required
+                            else ""
+                        )  # fmt: skip
+                    ) from None
                 continue
             values, bad = _numbers_in_text(column)
             comma = [b for b in bad if re.fullmatch(r"[-+]?\d*,\d+([eE][-+]?\d+)?", b)]
-            if comma:
-                raise ValueError(f"{path}: column {name!r} holds numbers written with decimal "
-                                 f"commas (e.g. {comma[0]!r}): write them with decimal "
+            grouped = [b for b in bad if re.fullmatch(r"[-+]?\d{1,3}(,\d{3})+(\.\d*)?", b)]
+            if comma or grouped:
+                example = (comma or grouped)[0]
+                what = ("decimal commas or thousands separators" if grouped and comma
+                        else "decimal commas" if comma else "thousands separators")  # fmt: skip
+                raise ValueError(f"{path}: column {name!r} holds numbers written with {what} "
+                                 f"(e.g. {example!r}): write plain numbers with decimal "
                                  "points") from None  # fmt: skip
             words = [b for b in bad if not MISSING_MARKER.fullmatch(b)]
+            digits = [b for b in words if re.search(r"\d", b)]
+            if auto and words and len(digits) >= 0.9 * len(words) and name not in required:
+                raise ValueError(  # (cells like 0.5m: left out, a model without that input)
+                    f"{path}: column {name!r} holds numbers in a form that is not read (e.g. "
+                    f"{digits[0]!r}: units or other marks in the cells?): write plain numbers, "
+                    "or name the states and inputs (--states, --inputs) to leave it out"
+                ) from None
             numbers = int(np.sum(~np.isnan(values)))
             if words and auto and numbers >= 19 * len(words):
                 raise ValueError(
@@ -1230,6 +1252,9 @@ def _float_columns(
                     "the cells, or name the states and inputs (--states, --inputs, --system) "
                     "so that it is read or left out as you mean"
                 ) from None
+            if not bad and not np.isnan(values).all():  # numbers (typeset minus signs)
+                out[name] = values * scale
+                continue
             if words or not bad:
                 if name in required:
                     example = words[0] if words else column[0].as_py()
@@ -1286,10 +1311,8 @@ def read_table(
         raise FileNotFoundError(f"no such log file: {path}")
     suffix = path.suffix.lower()
     if suffix == ".npz":
-        table = _read_npz_table(path, columns)
-        if time in table and time_unit != 1.0 and table[time].size:
-            table[time] = (table[time] - table[time].min()) * time_unit
-        return table
+        return _read_npz_table(path, columns, [*(columns or ()), *required], time, time_unit,
+                               notes, auto)  # fmt: skip
     try:
         if suffix in PARQUET_SUFFIXES:
             import pyarrow.parquet as pq
@@ -1341,28 +1364,39 @@ def is_npz_archive(path: str | Path) -> bool:
         return False
 
 
-def _read_npz_table(path: Path, columns: Sequence[str] | None) -> dict[str, np.ndarray]:
-    """An NPZ log: one 1-D numeric array per column, all of the same length."""
+def _read_npz_table(
+    path: Path,
+    columns: Sequence[str] | None,
+    required: Sequence[str],
+    time: str | None,
+    time_unit: float,
+    notes: list[str] | None,
+    auto: bool,
+) -> dict[str, np.ndarray]:
+    """An NPZ log: one 1-D array per column, all of the same length.
+
+    Its arrays are read as a table's columns are (:func:`_float_columns`: text, dates and
+    durations as in a CSV or parquet file).
+    """
+    import pyarrow as pa
+
     arrays = _npz_arrays(path)
     _check_columns(path, list(arrays), columns)
     layout = (
         "an NPZ log holds one 1-D array per column (t, states, inputs), or the trajectory "
         "archive that quad-sindy writes (count, t_0, x_0, u_0, state_names_0, ...)"
     )
-    out: dict[str, np.ndarray] = {}
-    for name, values in arrays.items():
-        if columns and name not in columns:
-            continue
-        if values.ndim == 1 and values.dtype.kind not in "biuf" and not columns:
-            continue  # text labels are left out, as in parquet logs
-        if values.ndim != 1 or values.dtype.kind not in "biuf":
+    picked = {n: v for n, v in arrays.items() if not columns or n in columns}
+    for name, values in picked.items():
+        if values.ndim != 1 or values.dtype.kind not in "biufUSM":
             raise ValueError(f"{path}: {layout}; array {name!r} has shape {values.shape} "
                              f"and type {values.dtype}")  # fmt: skip
-        out[name] = values.astype(np.float64)
-    if len({v.size for v in out.values()}) > 1:
-        sizes = {k: v.size for k, v in out.items()}
+    if len({v.size for v in picked.values()}) > 1:
+        sizes = {k: v.size for k, v in picked.items()}
         raise ValueError(f"{path}: {layout}; the arrays differ in length {sizes}")
-    return out
+    table = pa.table({n: pa.array(v.astype(str) if v.dtype.kind == "S" else v)
+                      for n, v in picked.items()})  # fmt: skip
+    return _float_columns(table, path, required, time, time_unit, notes, auto)
 
 
 def _check_columns(path: Path, names: Sequence[str], wanted: Sequence[str] | None) -> None:

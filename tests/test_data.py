@@ -183,6 +183,12 @@ def test_timestamps_and_npz_columns_are_read_exactly(other_clean, tmp_path):
     np.savez(tmp_path / "log.npz", **columns)
     segs, _ = load_data([tmp_path / "log.npz"], system="planar")
     assert np.array_equal(segs[0].x, tr.x) and segs[0].input_names == PI
+    # a parquet duration column (a fuzz trial's duration[ns] was read as seconds)
+    since = pa.array(np.round(tr.t * 1e9).astype(np.int64), pa.duration("ns"))
+    pq.write_table(pa.table({"t": since, **{n: columns[n] for n in (*PS, *PI)}}),
+                   tmp_path / "dur.parquet")  # fmt: skip
+    segs, _ = load_data([tmp_path / "dur.parquet"], system="planar")
+    assert np.allclose(segs[0].t, tr.t - tr.t[0], rtol=0, atol=1e-9)
     np.savez(tmp_path / "matrix.npz", t=tr.t, X=tr.x, U=tr.u)
     with pytest.raises(ValueError, match="one 1-D array per column.*'X' has shape"):
         load_data([tmp_path / "matrix.npz"], system="planar")
@@ -273,17 +279,21 @@ def _csv_text(tr: Trajectory, delimiter: str = ",", header: list[str] | None = N
 
 @pytest.mark.parametrize(
     "variant",
-    ["bom", "quoted", "semicolon", "tab", "empty_cells", "overflowing", "text_column", "iso_time"],
-)
+    ["bom", "quoted", "semicolon", "tab", "spaces", "typeset_minus", "empty_cells",
+     "overflowing", "text_column", "iso_time"],
+)  # fmt: skip
 def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
     """Forms a new user's real logs came in, each refused before: Excel's byte-order mark,
     a quoted header, ';' or tab delimiters, empty cells (pandas' NaN), an unused text column,
     ISO timestamps; a cell of 1e300 (a fuzz trial's: overflow warnings, then a refusal as
-    collinear) is a lost value like an empty cell."""
+    collinear) is a lost value like an empty cell; single spaces as the delimiter and
+    typeset minus signs (a fuzz trial's: refused, and six columns left out as text)."""
     tr = other_clean[0]
-    text = _csv_text(tr, {"semicolon": ";", "tab": "\t"}.get(variant, ","))
+    text = _csv_text(tr, {"semicolon": ";", "tab": "\t", "spaces": " "}.get(variant, ","))
     lines = text.split("\n")
-    if variant == "bom":
+    if variant == "typeset_minus":  # U+2212, as a spreadsheet may typeset it
+        text = "\n".join([lines[0]] + [ln.replace("-", "\u2212") for ln in lines[1:]])
+    elif variant == "bom":
         text = "\ufeff" + text
     elif variant == "quoted":
         text = "\n".join([",".join(f'"{c}"' for c in lines[0].split(","))] + lines[1:])
@@ -315,7 +325,8 @@ def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
 @pytest.mark.parametrize(
     "variant", ["text_cell", "decimal_comma", "unsorted", "half_rate_input", "extra_columns",
                 "header_only", "empty_column", "mode_column", "input_dropouts", "clock_back",
-                "input_random_loss", "newest_first", "junk_cells"],
+                "input_random_loss", "newest_first", "junk_cells", "thousands", "units",
+                "list_input"],
 )  # fmt: skip
 def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
     other_clean, tmp_path, variant
@@ -372,6 +383,12 @@ def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
             cells = lines[k].split(",")
             cells[5] = "x"
             lines[k] = ",".join(cells)
+    elif variant in ("thousands", "units"):  # a fuzz trial's cells: the column was left out
+        u1 = [f"{v * 1e3:,.3f}" if variant == "thousands" else f"{v}N" for v in tr.u[:, 0]]
+        rows = np.column_stack([tr.t, tr.x]).tolist()
+        lines = [lines[0].replace(",", ";")] + [
+            ";".join([*map(repr, r), a, repr(b)]) for r, a, b in zip(rows, u1, tr.u[:, 1],
+                                                                  strict=True)]  # fmt: skip
     elif variant == "clock_back":  # stamps set back 25 ms at row 300: the rows are in order
         lines = [lines[0]] + [f"{float(tr.t[k] - 0.025 * (k >= 300))!r},"
                               + ln.split(",", 1)[1] for k, ln in enumerate(lines[1:])]  # fmt: skip
@@ -383,9 +400,22 @@ def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
                "empty_column": r"column\(s\) \['phi_dot'\] hold no numbers",
                "junk_cells": r"column 'z_dot' holds numbers and 5 cell\(s\) of words "
                              r"\(e\.g\. 'x'\)"}  # fmt: skip
-    if variant in refused:  # junk_cells: with no states named (z_dot vanished, z' = 0)
+    refused["thousands"] = r"column 'u1' holds numbers written with thousands separators"
+    refused["units"] = r"column 'u1' holds numbers in a form that is not read \(e\.g\. '\S+N'"
+    refused["list_input"] = r"column 'u1' is not numeric \(of type list"
+    if variant == "list_input":  # a parquet column of lists where u1 belongs
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        columns = dict(zip(("t", *PS, "u2"), np.column_stack([tr.t, tr.x, tr.u[:, 1]]).T,
+                           strict=True))  # fmt: skip
+        columns["u1"] = pa.array([[v] for v in tr.u[:, 0]])
+        path = tmp_path / "log.parquet"
+        pq.write_table(pa.table(columns), path)
+    if variant in refused:  # with no states named, as identify reads a log it is given
+        auto = variant in ("junk_cells", "thousands", "units", "list_input")
         with pytest.raises(ValueError, match=refused[variant]):
-            load_data([path], system=None if variant == "junk_cells" else "planar")
+            load_data([path], system=None if auto else "planar")
         return
     if variant == "mode_column":  # with no states named: a label or a state? Asked
         with pytest.raises(ValueError, match=r"column 'mode' holds numbers and 19 cell"):
