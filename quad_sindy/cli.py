@@ -219,6 +219,11 @@ MAX_FLIGHT_ROWS = 10**7
 """The most rows ``flights`` writes in one run (about 1 GB of CSV; a fuzzed 1e10 asked 75 GB)."""
 
 
+FLIGHTS_RECORD = "flights.json"
+"""What ``flights`` wrote into a folder (its options, its files): flight files beside it may be
+replaced by a rerun; others are a user's and never are."""
+
+
 @app.command()
 def flights(
     out: Annotated[Path, typer.Option(help="folder for the flights (flight_K.csv)")],
@@ -244,6 +249,8 @@ def flights(
     ``simulate`` cases lack, so their 6-DOF data cannot separate the yaw terms), applied
     inputs recorded; identify them with ``quad-sindy identify OUT/flight_*.csv``.
     """
+    import dataclasses
+
     from identification.data import write_trajectory_csv
     from identification.experiments.synthetic import (
         FlightSpec,
@@ -251,6 +258,7 @@ def flights(
         planar_flights,
         quad6dof_flights,
     )
+    from quad_envs.fileio import write_json
     from quad_envs.params import check_can_hover, get_preset, with_changes
 
     if system not in ("planar", "quad6dof"):
@@ -275,6 +283,15 @@ def flights(
         _fail(f"{out} holds {', '.join(stale[:3])}{' ...' if len(stale) > 3 else ''} of an "
               f"earlier run that {wanted} flight(s) would not replace, and {out}/flight_*.csv "
               "would mix them: choose a new folder or remove them")  # fmt: skip
+    targets = [out / f"flight_{k}.csv" for k in range(wanted)]
+    blocked = [p.name for p in targets if p.exists() and not p.is_file()]
+    if blocked:
+        _fail(f"{out / blocked[0]} is not a file: choose a new folder or remove it")
+    if not (out / FLIGHTS_RECORD).is_file():  # a user's own files are never replaced
+        foreign = [p.name for p in targets if p.exists()]
+        if foreign:
+            _fail(f"{out} holds {', '.join(foreign[:3])}, which flights did not write (no "
+                  f"{FLIGHTS_RECORD} beside them): choose a new folder or move them")  # fmt: skip
     try:
         params = get_preset(vehicle or "paper", system)
         changes = _vehicle_options(None, param).get("params")
@@ -297,6 +314,10 @@ def flights(
     if noise > 0:
         trajs = add_noise(trajs, noise, seed=100 + seed)
     out.mkdir(parents=True, exist_ok=True)
+    record = {"command": "flights", "system": system, "vehicle": vehicle or "paper",
+              "param": list(param or []), "spec": dataclasses.asdict(spec), "noise": noise,
+              "files": [p.name for p in targets]}  # fmt: skip
+    write_json(out / FLIGHTS_RECORD, record)  # first: it marks the folder's flights as ours
     for k, tr in enumerate(trajs):
         write_trajectory_csv(out / f"flight_{k}.csv", tr)
     tilts = [j for j, n in enumerate(trajs[0].state_names) if n in ("phi", "theta")]
@@ -501,7 +522,11 @@ def identify(
     window_value = _number_option("--window", window, int, low=1) if window != "auto" else None
     _writable_file(out, data)  # before the selection, which may take a minute
     if lam_value is None and method != "paper":
-        _writable_file(plot or out.with_suffix(".png"), data, "--plot")
+        figure = plot or out.with_suffix(".png")
+        if figure.resolve() == out.resolve():  # (the plot was written, then the model on it)
+            _fail(f"the selection plot and --out are the same file {out}: give --out a .json "
+                  "name, or --plot another file")  # fmt: skip
+        _writable_file(figure, data, "--plot")
 
     try:
         preset = system.value if system else None
@@ -1308,6 +1333,12 @@ def main() -> None:
     warnings.showwarning = _one_line_warning
     # The commands print a selection's notes themselves ("warning: ..."), once.
     warnings.simplefilter("ignore", IdentificationWarning)
+    # numpy's floating-point notes (an overflow in a diverging rollout) are not the user's:
+    # what they lead to is said in words (a score of inf, a refusal)
+    warnings.filterwarnings(
+        "ignore", "(overflow|underflow|invalid value|divide by zero) encountered", RuntimeWarning
+    )
+    warnings.filterwarnings("ignore", "(Mean of empty slice|Degrees of freedom)", RuntimeWarning)
     usage_error = typer.BadParameter.__bases__[0]  # click's UsageError, as typer carries it
     try:
         code = app(standalone_mode=False)

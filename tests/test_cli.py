@@ -371,6 +371,22 @@ def test_outputs_never_replace_the_data_a_special_file_or_an_earlier_runs_flight
     code, _, err = run_cli(monkeypatch, capsys, "flights", "--out", str(flights), "--count", "1",
                            "--steps", "60")  # fmt: skip
     assert_one_line_error(code, err, "flight_1.csv, flight_2.csv of an earlier run")
+    # a fuzz trial's: the plot onto --out, a user's own flight_0.csv, a folder in the way
+    same = str(tmp_path / "q.json")
+    for extra in (["--out", str(tmp_path / "p.png")], ["--out", same, "--plot", same]):
+        code, _, err = run_cli(monkeypatch, capsys, "identify", *logs, *extra)
+        assert_one_line_error(code, err, "the selection plot and --out are the same file")
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "flight_0.csv").write_text("MY OWN DATA")
+    code, _, err = run_cli(monkeypatch, capsys, "flights", "--out", str(mine), "--steps", "60")
+    assert_one_line_error(code, err, "flight_0.csv, which flights did not write")
+    assert (mine / "flight_0.csv").read_text() == "MY OWN DATA"
+    (tmp_path / "g" / "flight_1.csv").mkdir(parents=True)
+    code, _, err = run_cli(monkeypatch, capsys, "flights", "--out", str(tmp_path / "g"),
+                           "--steps", "60")  # fmt: skip
+    assert_one_line_error(code, err, "flight_1.csv is not a file")
+    assert not (tmp_path / "g" / "flight_0.csv").exists()
 
 
 def test_show_leaves_out_a_selection_record_a_user_edited(monkeypatch, capsys, tmp_path):
