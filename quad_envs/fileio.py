@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -32,11 +33,13 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Writes data to a temporary file beside ``path`` and renames it into place.
 
     A symbolic link is kept and the file it names is written (renaming onto the link would
-    replace the link itself); a device, FIFO or socket is refused, never replaced.
+    replace the link itself); a device, FIFO or socket is refused, never replaced. A file
+    replaced keeps its permissions, and a read-only one is refused (a fuzz trial's 0444 model
+    was replaced and a 0600 one became 0644); a new one gets :func:`file_mode`.
 
     Raises:
-        ValueError: ``path`` is a directory or not a regular file, or its folder cannot be
-            created or written.
+        ValueError: ``path`` is a directory, not a regular file or read-only, or its folder
+            cannot be created or written.
     """
     given = Path(path)
     path = Path(os.path.realpath(given)) if given.is_symlink() else given
@@ -46,13 +49,19 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
         raise ValueError(
             f"{given} is not a regular file (a device, FIFO or socket); give a file name"
         )
+    mode = file_mode()
+    if path.is_file():
+        mode = stat.S_IMODE(path.stat().st_mode)
+        if not mode & stat.S_IWUSR:
+            raise ValueError(f"{given} is read-only: give another file name, or make it "
+                             "writable to replace it")  # fmt: skip
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     except OSError as exc:
         raise ValueError(f"cannot write {given}: {exc.strerror}") from None
     try:
-        os.fchmod(fd, file_mode())
+        os.fchmod(fd, mode)
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
             handle.flush()

@@ -52,3 +52,18 @@ def test_a_link_is_written_through_and_special_files_are_refused_not_replaced(tm
     with pytest.raises(ValueError, match="pipe is not a regular file"):
         write_json(fifo, {})
     assert stat.S_ISFIFO(fifo.stat().st_mode)
+
+
+def test_a_replaced_file_keeps_its_permissions_and_a_read_only_one_is_kept(tmp_path):
+    """A fuzz trial's 0444 model was replaced, and a 0600 one came back 0644."""
+    private = write_json(tmp_path / "p.json", {"x": 1})
+    private.chmod(0o600)
+    write_json(private, {"x": 2})
+    assert stat.S_IMODE(private.stat().st_mode) == 0o600 and json.loads(private.read_text()) == {
+        "x": 2
+    }
+    locked = write_json(tmp_path / "r.json", {"x": 1})
+    locked.chmod(0o444)
+    with pytest.raises(ValueError, match="r.json is read-only"):
+        write_json(locked, {"x": 2})
+    assert json.loads(locked.read_text()) == {"x": 1}
