@@ -1525,6 +1525,12 @@ def load_data(
     """
     if isinstance(paths, str | Path):
         paths = [paths]  # one file (a string is not a list of one-letter paths)
+    seen: dict[Path, str | Path] = {}
+    for path in paths:  # (a fuzz trial's file given twice counted twice, without a word)
+        where = Path(path).resolve()
+        if where in seen:
+            raise ValueError(f"{path} is given twice (as {seen[where]} too): give each log once")
+        seen[where] = path
     trajs: list[Trajectory] = []
     report = CleanReport()
     first: tuple[str, tuple[str, ...]] | None = None

@@ -392,12 +392,20 @@ def _holds(term: Term, part: Term) -> bool:
 def _parse_spec_text(text: str) -> dict[str, object]:
     """``degree=2;angles=phi,theta;extra=u1 sin(phi),y_dot^3`` -> a dict for LibrarySpec."""
     out: dict[str, object] = {}
-    for item in filter(None, (p.strip() for p in text.split(";"))):
+    items = [p.strip() for p in text.split(";") if p.strip()]
+    if not items:  # (an empty --library was a library without angles, silently)
+        raise ValueError(f"library spec {text!r} is empty: leave --library out for the default")
+    for item in items:
         key, sep, value = item.partition("=")
         if not sep:
+            from quad_envs.vehicles import VEHICLES
+
             raise ValueError(
-                f"library spec item {item!r} is not key=value (items are separated by ';')"
+                f"library spec item {item!r} is not key=value (items are separated by ';'); "
+                f"a preset is one of {', '.join(dict.fromkeys([*PRESETS, *VEHICLES]))}"
             )
+        if key.strip() in out:  # (the last one won, silently)
+            raise ValueError(f"library spec gives {key.strip()!r} twice: give it once")
         out[key.strip()] = value.strip()
     return _check_fields(out, "library spec")
 
@@ -585,6 +593,8 @@ def _read_toml(path: Path, angles: Sequence[str]) -> dict[str, object]:
         table = tomllib.loads(path.read_text()).get("library")
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: malformed TOML ({exc})") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path} is not a TOML file: not text (binary?)") from None
     if not isinstance(table, dict):
         raise ValueError(f"{path}: needs a [library] table")
     out = _check_fields(table, str(path))

@@ -402,6 +402,9 @@ def _check_meta(meta: dict[str, Any], inputs: Sequence[str], source: str) -> Non
                              f"{10**6}, got {value!r}")  # fmt: skip
     if not isinstance(meta.get("time_column", "t"), str):
         raise ValueError(f"{source}: meta.time_column must be a column name (a string)")
+    if not isinstance(meta.get("units", {}), dict):  # (a string was read as seconds, silently)
+        raise ValueError(f"{source}: meta.units must be a JSON object ({{\"time\": \"s\", "
+                         f"\"angles\": \"rad\"}}), got {meta['units']!r}")  # fmt: skip
 
 
 def _is_range(bounds: Any) -> bool:

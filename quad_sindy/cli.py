@@ -52,8 +52,13 @@ def _shifted(trajs: list, rows: int) -> tuple[list, str]:
 
 
 def _names(text: str | None) -> list[str] | None:
-    """A comma-separated option as a list of names (None when not given)."""
-    return [c.strip() for c in text.split(",") if c.strip()] if text else None
+    """A comma-separated option as a list of names (None when not given; empty: refused)."""
+    if text is None:
+        return None
+    names = [c.strip() for c in text.split(",") if c.strip()]
+    if not names:  # (--states "" counted as not given)
+        _fail(f"an option names no column ({text!r}): leave it out, or name the columns")
+    return names
 
 
 def _states_taken(states: tuple[str, ...]) -> str:
@@ -518,7 +523,10 @@ def identify(
 
     noted: tuple = ()  # (data, library) once both are known: their notes precede a refusal
 
-    lam_value = _number_option("--lambda", lam, float, low=0.0) if lam != "auto" else None
+    if library is not None and not library.strip():  # (read as no library, silently)
+        _fail("--library is empty: leave it out for the default, or give a preset or spec")
+    # (a scaled threshold: 1 already leaves out a term that explains the whole target)
+    lam_value = _number_option("--lambda", lam, float, 0.0, 1e3) if lam != "auto" else None
     window_value = _number_option("--window", window, int, low=1) if window != "auto" else None
     _writable_file(out, data)  # before the selection, which may take a minute
     if lam_value is None and method != "paper":
@@ -916,15 +924,16 @@ def _schema_of(path: Path) -> str | None:
     return data.get("schema") if isinstance(data, dict) else None
 
 
-def _number_option(flag: str, text: str, kind: type, low: float) -> Any:
+def _number_option(flag: str, text: str, kind: type, low: float, high: float = math.inf) -> Any:
     """A numeric option's value (``auto`` handled by the caller), or a one-line error."""
     try:
         value = kind(text)
     except ValueError:
         value = None
-    if value is None or not value >= low or (kind is float and not math.isfinite(value)):
+    if value is None or not low <= value <= high or (kind is float and not math.isfinite(value)):
         what = "an integer" if kind is int else "a number"
-        _fail(f"{flag} takes 'auto' or {what} >= {low:g}, got {text!r}")
+        bound = f">= {low:g}" if high == math.inf else f"from {low:g} to {high:g}"
+        _fail(f"{flag} takes 'auto' or {what} {bound}, got {text!r}")
     return value
 
 

@@ -83,15 +83,32 @@ def ppo_zip(tmp_path_factory):
             ["not a quadrotor env"],
         ),
         (["reproduce", "--authors-csv", "{binary}", "--out", "{tmp}/r"], ["not a text CSV"]),
+        # a fuzz trial's options that overflowed, or were read as something else silently
+        (["identify", "{csv}", "--out", "{tmp}/m.json", "--lambda", "1e300"], ["from 0 to 1000"]),
+        (["identify", "{csv}", "--out", "{tmp}/m.json", "--library", ""], ["--library is empty"]),
+        (["identify", "{csv}", "--out", "{tmp}/m.json", "--states", ","], ["names no column"]),
+        (["identify", "{csv}", "{csv}", "--out", "{tmp}/m.json"], ["is given twice"]),
+        (
+            ["identify", "{csv}", "--out", "{tmp}/m.json", "--library", "degree=1;degree=3"],
+            ["gives 'degree' twice"],
+        ),
+        (
+            ["identify", "{csv}", "--out", "{tmp}/m.json", "--library", "crazyflie"],
+            ["a preset is one of planar, quad6dof"],
+        ),
     ],
 )
 def test_user_mistakes_get_one_line(monkeypatch, capsys, tmp_path, args, fragments):
     a_file = tmp_path / "afile"
     a_file.write_text("just text\n")
+    rng = np.random.default_rng(0)
+    rows = np.column_stack([0.01 * np.arange(60), rng.normal(size=(60, 8))])
+    header = "t,y,z,phi,y_dot,z_dot,phi_dot,u1,u2"
+    np.savetxt(tmp_path / "log.csv", rows, delimiter=",", header=header, comments="")
     (tmp_path / "bad.parquet").write_text("t,y\n0,1\n")  # not parquet inside
     binary = tmp_path / "model.json"
     binary.write_bytes(bytes(np.random.default_rng(0).integers(128, 256, 64, dtype=np.uint8)))
-    names = {"tmp": tmp_path, "file": a_file, "binary": binary}
+    names = {"tmp": tmp_path, "file": a_file, "binary": binary, "csv": tmp_path / "log.csv"}
     code, _, err = run_cli(monkeypatch, capsys, *(a.format(**names) for a in args))
     assert_one_line_error(code, err, *fragments)
 

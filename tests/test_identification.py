@@ -352,6 +352,7 @@ def test_model_round_trip_and_pickle(tmp_path, case_c):
         (lambda d: json.dumps({**d, "meta": {"window": 10**9}}), "meta.window must be"),
         (lambda d: json.dumps({**d, "meta": {"measured_inputs": 5}}), "meta.measured_inputs"),
         (lambda d: json.dumps({**d, "meta": {"measured_inputs": ["v9"]}}), "some of the inputs"),
+        (lambda d: json.dumps({**d, "meta": {"units": "ms"}}), "meta.units must be a JSON object"),
     ],
 )
 def test_malformed_model_files_get_clear_errors(tmp_path, edit, message):
