@@ -77,7 +77,9 @@ def _writable_folder(folder: Path) -> None:
     if folder.exists() and not folder.is_dir():
         _fail(f"{folder} is a file, not a folder")
     existing = next((p for p in (folder, *folder.parents) if p.exists()), Path("."))
-    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+    if not existing.is_dir():
+        _fail(f"cannot write to {folder}: {existing} is a file, not a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
         _fail(f"cannot write to {folder}: {existing} is not writable")
 
 
@@ -183,6 +185,8 @@ def simulate(
 
     _finite("--dt", dt)
     _finite("--duration", duration)
+    if duration / dt < 2:  # (a fuzz trial's --dt 5 --duration 1 wrote one row)
+        _fail(f"--duration {duration:g} at --dt {dt:g} is under 2 rows: a log needs steps")
     if duration / dt > MAX_ROWS:
         _fail(f"--duration {duration:g} at --dt {dt:g} is {duration / dt:.3g} rows; at most "
               f"{MAX_ROWS:,} per run")  # fmt: skip
@@ -277,6 +281,9 @@ def flights(
     _finite("--tilt", tilt)
     for flag, value in (("--noise", noise), ("--excitation", excitation), ("--drag", drag)):
         _finite(flag, value, strict=False)
+    if not 1e-4 <= dt <= 1.0 or noise > 1.0:  # (a fuzz trial's 1e-300 s and 1e300 noise)
+        _fail(f"--dt must be from 1e-4 to 1 s and --noise at most 1 (a standard deviation "
+              f"in the states' units), got {dt:g} and {noise:g}")  # fmt: skip
     if seed < 0:
         _fail(f"--seed must be a non-negative integer, got {seed}")
     _writable_folder(out)

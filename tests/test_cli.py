@@ -76,7 +76,7 @@ def ppo_zip(tmp_path_factory):
         (["flights", "--out", "{tmp}/f", "--noise", "nan"], ["--noise must be a finite number"]),
         (["flights", "--out", "{tmp}/f", "--drag", "-1"], ["--drag must be a finite number"]),
         (["flights", "--out", "{tmp}/f", "--tilt", "-1"], ["--tilt must be a finite number"]),
-        (["flights", "--out", "{tmp}/f", "--steps", "40", "--dt", "5"], ["tumbled"]),
+        (["flights", "--out", "{tmp}/f", "--steps", "40", "--dt", "0.5"], ["tumbled"]),
         (["flights", "--out", "{tmp}/f", "--steps", "10000000000"], ["at most 10,000,000 rows"]),
         (
             ["compare", "--model", "{file}", "--env", "CartPole-v1", "--out", "{tmp}/c"],
@@ -88,6 +88,10 @@ def ppo_zip(tmp_path_factory):
         (["identify", "{csv}", "--out", "{tmp}/m.json", "--library", ""], ["--library is empty"]),
         (["identify", "{csv}", "--out", "{tmp}/m.json", "--states", ","], ["names no column"]),
         (["identify", "{csv}", "{csv}", "--out", "{tmp}/m.json"], ["is given twice"]),
+        (["simulate", "--out", "{tmp}/c.csv", "--dt", "5", "--duration", "1"], ["under 2 rows"]),
+        (["flights", "--out", "{tmp}/f", "--noise", "1e300"], ["--noise at most 1"]),
+        (["flights", "--out", "{tmp}/f", "--dt", "1e-300"], ["--dt must be from 1e-4 to 1 s"]),
+        (["flights", "--out", "{file}/sub"], ["afile is a file, not a folder"]),
         (
             ["identify", "{csv}", "--out", "{tmp}/m.json", "--library", "degree=1;degree=3"],
             ["gives 'degree' twice"],
