@@ -409,6 +409,15 @@ def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inpu
     ratio = long_run_ratio(lagged, names, xi, w)
     assert input_shift_note(lagged, names, w, xi, ratio) is None
     assert "y_dot taken 2 row(s) later" in state_shift_note(lagged, names, w, xi, ratio)
+    # more data than the checks refit on (SHIFT_ROWS): blocks spread over every log, the
+    # same lag named
+    from identification.diagnostics import SHIFT_ROWS, spread_blocks
+
+    many = [t.slice(0, len(t)) for _ in range(14) for t in lagged]  # 42 logs, 24,948 rows
+    assert sum(map(len, many)) > SHIFT_ROWS
+    blocks = spread_blocks(many, SHIFT_ROWS, block=500)
+    assert sum(map(len, blocks)) <= SHIFT_ROWS and len(blocks) >= 30
+    assert "y_dot taken 2 row(s) later" in state_shift_note(many, names, w, xi, ratio)
     only_z = np.zeros_like(xi)  # no equation reads y (a fuzzed log's empty equations)
     only_z[1, names.index("z_dot")] = 1.0
     with warnings.catch_warnings():
