@@ -232,13 +232,17 @@ class SelectionReport:
 
     def plot(self, path: str | Path) -> Path:
         """Validation error against number of terms, one series per window, choice marked."""
+        from quad_envs.fileio import atomic_write_bytes
+
+        return atomic_write_bytes(path, self.plot_png())
+
+    def plot_png(self) -> bytes:
+        """:meth:`plot`'s figure as PNG bytes (to write beside the model at the same moment)."""
         import matplotlib
 
         matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
         from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
-
-        from quad_envs.fileio import atomic_write_bytes
 
         fig, ax = plt.subplots(figsize=(6.4, 4.2))
         for w in sorted({c.window for c in self.candidates}):
@@ -266,7 +270,7 @@ class SelectionReport:
         buffer = io.BytesIO()
         fig.savefig(buffer, format="png", dpi=120)
         plt.close(fig)
-        return atomic_write_bytes(path, buffer.getvalue())
+        return buffer.getvalue()
 
 
 # -- folds and scores -------------------------------------------------------------------

@@ -527,8 +527,10 @@ def identify(
     from identification.scoring import long_enough, typical_length
     from identification.selection import WINDOWS, select_model
     from identification.support import long_run_ratio
+    from quad_envs.fileio import atomic_write_bytes
 
     noted: tuple = ()  # (data, library) once both are known: their notes precede a refusal
+    figure: tuple[Path, bytes] | None = None  # the selection plot, written with the model
 
     if library is not None and not library.strip():  # (read as no library, silently)
         _fail("--library is empty: leave it out for the default, or give a preset or spec")
@@ -537,11 +539,11 @@ def identify(
     window_value = _number_option("--window", window, int, low=1) if window != "auto" else None
     _writable_file(out, data)  # before the selection, which may take a minute
     if lam_value is None and method != "paper":
-        figure = plot or out.with_suffix(".png")
-        if figure.resolve() == out.resolve():  # (the plot was written, then the model on it)
+        figure_path = plot or out.with_suffix(".png")
+        if figure_path.resolve() == out.resolve():  # (the plot was written, then the model)
             _fail(f"the selection plot and --out are the same file {out}: give --out a .json "
                   "name, or --plot another file")  # fmt: skip
-        _writable_file(figure, data, "--plot")
+        _writable_file(figure_path, data, "--plot")
 
     try:
         preset = system.value if system else None
@@ -684,7 +686,9 @@ def identify(
                 )
                 for note in report.warnings:
                     typer.echo(f"warning: {note}")
-                report.plot(plot or out.with_suffix(".png"))
+                # rendered now, written with the model (an interrupt left a new plot beside
+                # the old model)
+                figure = (plot or out.with_suffix(".png"), report.plot_png())
             else:
                 if drop_outliers:
                     _fail("--drop-outliers works with the automatic selection (--lambda auto)")
@@ -721,6 +725,8 @@ def identify(
     model.meta["units"] = {"time": time_unit.value, "angles": angle_unit.value}
     model.meta["time_column"] = time
     model.save(out)
+    if figure is not None:
+        atomic_write_bytes(*figure)
     typer.echo("\n".join(model.equations()))
     typer.echo(f"wrote {out}")
 
