@@ -1056,6 +1056,8 @@ def compare(
               "the model is --model")  # fmt: skip
     if not tolerance > 0:
         _fail(f"--tolerance must be positive, got {tolerance:g}")
+    if seed < 0:  # (numpy's own refusal came after the simulation had started)
+        _fail(f"--seed must be a non-negative integer, got {seed}")
     import quad_envs
 
     if env not in (*quad_envs.ENV_IDS, "CrazyflieMotors-v0"):

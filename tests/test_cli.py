@@ -89,6 +89,7 @@ def ppo_zip(tmp_path_factory):
         (["identify", "{csv}", "--out", "{tmp}/m.json", "--states", ","], ["names no column"]),
         (["identify", "{csv}", "{csv}", "--out", "{tmp}/m.json"], ["is given twice"]),
         (["simulate", "--out", "{tmp}/c.csv", "--dt", "5", "--duration", "1"], ["under 2 rows"]),
+        (["compare", "--model", "{file}", "--out", "{tmp}/c", "--seed", "-1"], ["--seed must be"]),
         (["flights", "--out", "{tmp}/f", "--noise", "1e300"], ["--noise at most 1"]),
         (["flights", "--out", "{tmp}/f", "--dt", "1e-300"], ["--dt must be from 1e-4 to 1 s"]),
         (["flights", "--out", "{file}/sub"], ["afile is a file, not a folder"]),
