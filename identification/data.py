@@ -1168,6 +1168,20 @@ def _numbers_in_text(column: Any) -> tuple[np.ndarray, list[str]]:
     return values, bad
 
 
+def _numberish(text: str) -> bool:
+    """Whether a cell is a number with marks around it (``0.5m``, ``12.5 V``).
+
+    Its digits, signs and points read as a number and half of it or more is digits: a label
+    (``IMU0``, ``LAND``) is not one.
+    """
+    core = re.sub(r"[^0-9.eE+\-]", "", text)
+    try:
+        float(core)
+    except ValueError:
+        return False
+    return sum(c.isdigit() for c in text) >= 0.5 * len(text)
+
+
 def _float_columns(
     table: Any,
     path: Path,
@@ -1239,7 +1253,7 @@ def _float_columns(
                                  f"(e.g. {example!r}): write plain numbers with decimal "
                                  "points") from None  # fmt: skip
             words = [b for b in bad if not MISSING_MARKER.fullmatch(b)]
-            digits = [b for b in words if re.search(r"\d", b)]
+            digits = [b for b in words if _numberish(b)]
             if auto and words and len(digits) >= 0.9 * len(words) and name not in required:
                 raise ValueError(  # (cells like 0.5m: left out, a model without that input)
                     f"{path}: column {name!r} holds numbers in a form that is not read (e.g. "

@@ -326,7 +326,7 @@ def test_common_csv_forms_are_read_as_written(other_clean, tmp_path, variant):
     "variant", ["text_cell", "decimal_comma", "unsorted", "half_rate_input", "extra_columns",
                 "header_only", "empty_column", "mode_column", "input_dropouts", "clock_back",
                 "input_random_loss", "newest_first", "junk_cells", "thousands", "units",
-                "list_input", "shuffled"],
+                "list_input", "shuffled", "label_digits"],
 )  # fmt: skip
 def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
     other_clean, tmp_path, variant
@@ -378,6 +378,8 @@ def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
             lines[k] = ",".join(cells[:-2] + ["", cells[-1]])
     elif variant == "newest_first":
         lines = [lines[0], *lines[:0:-1]]
+    elif variant == "label_digits":  # labels with a digit are labels, not numbers with marks
+        lines = [lines[0] + ",imu"] + [ln + f",IMU{k % 2}" for k, ln in enumerate(lines[1:])]
     elif variant == "shuffled":  # a fuzz trial's: read as appended logs, 119 of 600 rows kept
         order = np.random.default_rng(2).permutation(len(lines) - 1) + 1
         lines = [lines[0], *(lines[k] for k in order)]
@@ -441,6 +443,9 @@ def test_real_log_pathologies_are_repaired_and_said_or_refused_by_name(
         assert np.array_equal(segs[0].x, tr.x)
     elif variant == "mode_column":  # categorical: text, not a state
         assert "text column 'mode' left out" in summary and report.rows_out == len(tr)
+    elif variant == "label_digits":  # with no states named too
+        _, auto = load_data([path])
+        assert "text column 'imu' left out" in auto.summary()
     elif variant == "input_dropouts":  # lost samples, not a rate: the rows go
         assert report.held_inputs == 0 and report.nonfinite_rows == 3
     elif variant == "input_random_loss":  # a quarter, but not a rate: not held either
