@@ -25,6 +25,7 @@ import numpy as np
 
 import quad_envs  # noqa: F401 (registers the ids)
 from identification.data import IdentificationWarning, Trajectory
+from identification.libraries import rotor_names
 from quad_envs.trajectories import RandomWaypoints
 
 Policy = Callable[[np.ndarray, dict[str, Any]], np.ndarray]
@@ -86,9 +87,8 @@ def collect_rollouts(
         )
     rotors = lagging if rotor_states is None else rotor_states
     if rotors:  # the rotors' thrusts are states; their commands, held over a step, the inputs
-        k = base.params.mixer.shape[1]
-        state_names = (*state_names, *(f"T{i + 1}" for i in range(k)))
-        input_names = tuple(f"Tc{i + 1}" for i in range(k))
+        thrusts, input_names = rotor_names(int(base.params.mixer.shape[1]))
+        state_names = (*state_names, *thrusts)
     angles = [vehicle.state_names.index(a) for a in vehicle.angle_names]
     measured = record == "measured"
     rng = np.random.default_rng(seed)

@@ -44,6 +44,7 @@ from identification.libraries import (
     planar_library,
     quad6dof_drag_library,
     rotor_library,
+    rotor_names,
 )
 from identification.model import IdentifiedModel
 from identification.rollouts import excitation_rollouts
@@ -63,8 +64,7 @@ from quad_envs.trajectories import RandomWaypoints
 ENV_ID = "PlanarQuad-v0"
 VELOCITIES = ("y_dot", "z_dot")
 RIGID_STATES = ("y", "z", "phi", "y_dot", "z_dot", "phi_dot")
-ROTOR_STATES = ("T1", "T2")
-ROTOR_INPUTS = ("Tc1", "Tc2")
+ROTOR_STATES, ROTOR_INPUTS = rotor_names(2)
 DRAG_FIELDS = ("drag_linear_xy", "drag_linear_z", "drag_quadratic_xy", "drag_quadratic_z")
 ROTOR_LIBRARY = LibrarySpec(degree=1, angles=("phi",))
 """Library of the observed-rotor case: 1, every variable, and each times sin(phi), cos(phi)."""
@@ -714,8 +714,7 @@ def drift_table(result: DriftResult) -> str:
 
 ENV_6DOF = "Quad6DOF-v0"
 BODY_VELOCITIES = ("u", "v", "w")
-ROTOR_STATES_6DOF = ("T1", "T2", "T3", "T4")
-ROTOR_INPUTS_6DOF = ("Tc1", "Tc2", "Tc3", "Tc4")
+ROTOR_STATES_6DOF, ROTOR_INPUTS_6DOF = rotor_names(4)
 OTHER_VEHICLE_6DOF = Quad6DOFParams(
     mass=0.6, Jxx=4e-3, Jyy=5e-3, Jzz=8e-3, arm_length=0.15, gamma=0.012,
     rotor_force_max=0.6 * 9.81 / 4 * 2.4, frame="+", rotor_time_constant=0.04,
