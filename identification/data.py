@@ -858,6 +858,10 @@ def _regular_grid(t: np.ndarray, resolution: float) -> np.ndarray:
     return line if np.max(np.abs(t - line)) <= resolution + tiny else t
 
 
+LOST_SHARE = 0.1
+"""Long steps in more than this share of a log's steps are its rates, not rows it lost."""
+
+
 def _skipped_samples(steps: np.ndarray, median: float) -> np.ndarray:
     """Steps of about two sampling periods or more: rows the logger lost.
 
@@ -870,7 +874,10 @@ def _skipped_samples(steps: np.ndarray, median: float) -> np.ndarray:
     if not steps.size or median <= 0:
         return np.zeros(steps.size, dtype=bool)
     spread = 1.4826 * float(np.median(np.abs(steps / median - 1.0)))
-    return steps > (1.5 + 4.0 * spread) * median
+    long = steps > (1.5 + 4.0 * spread) * median
+    if long.mean() > LOST_SHARE:  # a logger of several rates, not lost rows (a recheck
+        return np.zeros(steps.size, dtype=bool)  # trial's 0.01 / 0.02 s steps were refused)
+    return long
 
 
 def _time_restarts(t: np.ndarray, gap_factor: float) -> np.ndarray:

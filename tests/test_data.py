@@ -485,7 +485,8 @@ def test_float32_time_stamps_are_read_as_the_regular_clock_they_round(other_clea
 def test_rows_the_logger_lost_split_the_log_and_a_jittery_clock_does_not(other_clean):
     """A clean log with 1 % of its rows deleted (a trial's: each lost row's input unknown,
     the logged one held over two periods; `phi_dot'` 9 % off, reported as 100 % jitter) is
-    split at each lost row and the model is exact; +-20 % jitter splits nothing. A log with
+    split at each lost row and the model is exact; +-20 % jitter and a logger of two rates
+    split nothing. A log with
     every stamp written twice is refused naming the repeated stamps."""
     rng = np.random.default_rng(3)
     segs, lost = [], 0
@@ -507,6 +508,11 @@ def test_rows_the_logger_lost_split_the_log_and_a_jittery_clock_does_not(other_c
     jittery = tr.t[0] + np.concatenate([[0.0], np.cumsum(rng.uniform(0.008, 0.012, len(tr) - 1))])
     parts, report = clean(jittery, tr.x, tr.u, PS, PI)
     assert len(parts) == 1 and report.skipped == 0
+    # a logger of two rates (steps of 0.01 and 0.02 s in turn: a recheck trial's, refused as
+    # rows lost): its rates, kept whole
+    two_rates = tr.t[0] + np.concatenate([[0.0], np.cumsum(np.tile([0.01, 0.02], len(tr)))])
+    parts, report = clean(two_rates[: len(tr)], tr.x, tr.u, PS, PI)
+    assert len(parts) == 1 and report.skipped == 0 and len(parts[0]) == len(tr)
 
 
 def test_time_unit_restarts_and_mixed_units_between_files(other_clean, tmp_path):
