@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import stat
 import sys
 from enum import Enum
 from pathlib import Path
@@ -233,6 +234,17 @@ FLIGHTS_RECORD = "flights.json"
 replaced by a rerun; others are a user's and never are."""
 
 
+def _flights_written(folder: Path) -> set[str]:
+    """The flight files a ``flights.json`` in ``folder`` records (none without one)."""
+    import json
+
+    try:
+        files = json.loads((folder / FLIGHTS_RECORD).read_text()).get("files", [])
+    except (OSError, ValueError, AttributeError, RecursionError):
+        return set()
+    return {f for f in files if isinstance(f, str) and re.fullmatch(r"flight_\d+\.csv", f)}
+
+
 @app.command()
 def flights(
     out: Annotated[Path, typer.Option(help="folder for the flights (flight_K.csv)")],
@@ -288,22 +300,27 @@ def flights(
         _fail(f"--seed must be a non-negative integer, got {seed}")
     _writable_folder(out)
     wanted = count or (3 if system == "planar" else 4)
+    ours = _flights_written(out)  # what an earlier flights run wrote here (flights.json)
     stale = sorted(p.name for p in out.glob("flight_*.csv")
                    if p.stem.removeprefix("flight_").isdigit()
-                   and int(p.stem.removeprefix("flight_")) >= wanted)  # fmt: skip
+                   and int(p.stem.removeprefix("flight_")) >= wanted
+                   and p.name not in ours)  # fmt: skip
     if stale:
-        _fail(f"{out} holds {', '.join(stale[:3])}{' ...' if len(stale) > 3 else ''} of an "
-              f"earlier run that {wanted} flight(s) would not replace, and {out}/flight_*.csv "
-              "would mix them: choose a new folder or remove them")  # fmt: skip
+        _fail(f"{out} holds {', '.join(stale[:3])}{' ...' if len(stale) > 3 else ''} that "
+              f"{wanted} flight(s) would not replace, and {out}/flight_*.csv would mix them: "
+              "choose a new folder or remove them")  # fmt: skip
     targets = [out / f"flight_{k}.csv" for k in range(wanted)]
-    blocked = [p.name for p in targets if p.exists() and not p.is_file()]
-    if blocked:
-        _fail(f"{out / blocked[0]} is not a file: choose a new folder or remove it")
-    if not (out / FLIGHTS_RECORD).is_file():  # a user's own files are never replaced
-        foreign = [p.name for p in targets if p.exists()]
-        if foreign:
-            _fail(f"{out} holds {', '.join(foreign[:3])}, which flights did not write (no "
-                  f"{FLIGHTS_RECORD} beside them): choose a new folder or move them")  # fmt: skip
+    for p in targets:  # checked before any is written (a run refused halfway mixed two)
+        if p.exists() and not p.is_file():
+            _fail(f"{p} is not a file: choose a new folder or remove it")
+        if p.is_file() and not p.stat().st_mode & stat.S_IWUSR:
+            _fail(f"{p} is read-only: choose a new folder, or make it writable")
+    foreign = [p.name for p in targets if p.exists() and p.name not in ours]
+    if foreign:  # a user's own files are never replaced
+        _fail(f"{out} holds {len(foreign)} flight file(s) ({', '.join(foreign[:3])}"
+              f"{' ...' if len(foreign) > 3 else ''}) that no {FLIGHTS_RECORD} beside them "
+              "records as written by flights (your own, or an older version's): choose a new "
+              "folder or move them")  # fmt: skip
     try:
         params = get_preset(vehicle or "paper", system)
         changes = _vehicle_options(None, param).get("params")
@@ -329,9 +346,16 @@ def flights(
     record = {"command": "flights", "system": system, "vehicle": vehicle or "paper",
               "param": list(param or []), "spec": dataclasses.asdict(spec), "noise": noise,
               "files": [p.name for p in targets]}  # fmt: skip
-    write_json(out / FLIGHTS_RECORD, record)  # first: it marks the folder's flights as ours
+    # first: it marks the folder's flights as ours (with those of the earlier run left)
+    record["files"] = sorted({*record["files"], *ours}, key=lambda n: (len(n), n))
+    write_json(out / FLIGHTS_RECORD, record)
     for k, tr in enumerate(trajs):
         write_trajectory_csv(out / f"flight_{k}.csv", tr)
+    for name in sorted(set(ours) - {p.name for p in targets}):  # an earlier run's extra
+        (out / name).unlink(missing_ok=True)  # flights: identify OUT/flight_*.csv would mix
+    if ours:
+        record["files"] = [p.name for p in targets]
+        write_json(out / FLIGHTS_RECORD, record)
     tilts = [j for j, n in enumerate(trajs[0].state_names) if n in ("phi", "theta")]
     flown = max(float(abs(tr.x[:, tilts]).max()) for tr in trajs)
     typer.echo(

@@ -390,9 +390,10 @@ def test_outputs_never_replace_the_data_a_special_file_or_an_earlier_runs_flight
     os.mkfifo(fifo)
     code, _, err = run_cli(monkeypatch, capsys, "identify", *logs, "--out", str(fifo))
     assert_one_line_error(code, err, "not a regular file")
+    (flights / "flights.json").unlink()  # files no record names: a user's, never replaced
     code, _, err = run_cli(monkeypatch, capsys, "flights", "--out", str(flights), "--count", "1",
                            "--steps", "60")  # fmt: skip
-    assert_one_line_error(code, err, "flight_1.csv, flight_2.csv of an earlier run")
+    assert_one_line_error(code, err, "flight_1.csv, flight_2.csv that 1 flight(s) would not")
     # a fuzz trial's: the plot onto --out, a user's own flight_0.csv, a folder in the way
     same = str(tmp_path / "q.json")
     for extra in (["--out", str(tmp_path / "p.png")], ["--out", same, "--plot", same]):
@@ -402,8 +403,25 @@ def test_outputs_never_replace_the_data_a_special_file_or_an_earlier_runs_flight
     mine.mkdir()
     (mine / "flight_0.csv").write_text("MY OWN DATA")
     code, _, err = run_cli(monkeypatch, capsys, "flights", "--out", str(mine), "--steps", "60")
-    assert_one_line_error(code, err, "flight_0.csv, which flights did not write")
+    assert_one_line_error(code, err, "(flight_0.csv) that no flights.json beside them records")
     assert (mine / "flight_0.csv").read_text() == "MY OWN DATA"
+    again = tmp_path / "again"
+    # a rerun with fewer flights removes the extra ones it recorded; a read-only flight is
+    # refused before any is written (a recheck trial's run replaced flight_0 first)
+    code, _, _ = run_cli(monkeypatch, capsys, "flights", "--out", str(again), "--count", "3",
+                         "--steps", "60")  # fmt: skip
+    assert code in (0, None)
+    code, _, _ = run_cli(monkeypatch, capsys, "flights", "--out", str(again), "--count", "1",
+                         "--steps", "60")  # fmt: skip
+    assert code in (0, None) and sorted(p.name for p in again.glob("flight_*")) == ["flight_0.csv"]
+    first = (again / "flight_0.csv").read_text()
+    code, _, _ = run_cli(monkeypatch, capsys, "flights", "--out", str(again), "--count", "2",
+                         "--steps", "60")  # fmt: skip
+    (again / "flight_1.csv").chmod(0o444)
+    code, _, err = run_cli(monkeypatch, capsys, "flights", "--out", str(again), "--count", "2",
+                           "--steps", "80")  # fmt: skip
+    assert_one_line_error(code, err, "flight_1.csv is read-only")
+    assert (again / "flight_0.csv").read_text() == first
     (tmp_path / "g" / "flight_1.csv").mkdir(parents=True)
     code, _, err = run_cli(monkeypatch, capsys, "flights", "--out", str(tmp_path / "g"),
                            "--steps", "60")  # fmt: skip
