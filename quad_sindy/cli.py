@@ -450,13 +450,30 @@ def _matching_rotor_preset(
     return None
 
 
+def _with_extra_states(preset: str, extra: tuple[str, ...], angles: list[str]) -> list[str]:
+    """A preset's library with the data's other states in the preset's form for a variable.
+
+    Each other state enters alone and times sin and cos of each angle. The other columns
+    may be unrelated (a battery voltage, a counter: a trial's clean 6-DOF log with three got
+    68 terms for 36 in the generic library) or states the dynamics need (a recheck trial's
+    wind state `w` in `y_dot'`: left out, 17 % at 1 s); with the preset's terms and these,
+    the selection keeps what the data support.
+    """
+    from identification.features import parse_term, term_name
+    from identification.libraries import default_library
+
+    terms = [*extra, *(f"{fn}({a}) {e}" for e in extra for a in angles for fn in ("sin", "cos"))]
+    variables = [*extra, *angles]
+    return list(dict.fromkeys([*default_library(preset),
+                               *(term_name(parse_term(t, variables)) for t in terms)]))  # fmt: skip
+
+
 def _containing_vehicle(
     state_names: tuple[str, ...], input_names: tuple[str, ...]
 ) -> tuple[str | None, tuple[str, ...]]:
     """A preset vehicle whose inputs are these and whose states are among these.
 
-    Returns its name and the other columns (a battery voltage, a counter: taken for states,
-    they gave a trial's clean 6-DOF log 68 terms for 36 in a generic library), or (None, ()).
+    Returns its name and the other columns, or (None, ()).
     """
     from identification.libraries import PRESETS
     from quad_envs.vehicles import VEHICLES
@@ -593,19 +610,26 @@ def identify(
         first = trajs[0]
         library_note = None
         taken = first.state_names  # printed with the model: every other column is a state
+        extended: list[str] | None = None  # a preset's library with the data's other states
         if preset is None and library is None and angles is None:
             preset = _matching_vehicle(first.state_names, first.input_names)
-            extra = ()
-            if preset is None and states is None:  # its variables and unrelated columns
-                preset, extra = _containing_vehicle(first.state_names, first.input_names)
-            if preset is not None:
+            owner, extra = _containing_vehicle(first.state_names, first.input_names)
+            if preset is None and owner is not None:  # its variables and other columns
+                declared = list(PRESET_ANGLES.get(owner, ()))
+                extended = _with_extra_states(owner, extra, declared)
+                library_note = (
+                    f"library: the {owner} vehicle's preset, with the other column(s) "
+                    f"{', '.join(extra)} as states (each alone and times sin and cos of "
+                    f"{', '.join(declared)}; {len(extended)} terms; --states leaves them out, "
+                    "--library chooses another)"
+                )
+                trajs, cleaning = load_data(*read, angles=declared, measured=first.measured,
+                                            time_unit=unit, angle_unit=turn)  # fmt: skip
+                first = trajs[0]
+            elif preset is not None:
                 library_note = (
                     f"library: the {preset} vehicle's preset (the data's variables are its "
                     "variables; --library or --angles choose another)"
-                    if not extra
-                    else f"library: the {preset} vehicle's preset, on its variables; the "
-                    f"other column(s) {', '.join(extra)} are left out (--states takes them in; "
-                    "--library or --angles choose another library)"
                 )
                 declared = list(PRESET_ANGLES.get(preset, ()))
                 as_preset = (data, _names(columns), preset, None, None, time.strip())
@@ -642,7 +666,7 @@ def identify(
             for note in data_warnings(trajs):
                 typer.echo(f"warning: {note}")
         else:
-            lib = library_from_spec(
+            lib = extended or library_from_spec(
                 library or preset, first.state_names, first.input_names, declared
             )
             noted = (trajs, lib)
@@ -670,7 +694,7 @@ def identify(
                     "measured signals rather than commands held over each step, declare them "
                     "with --measured (held, a changing tilt leaves terms of about g dt / 2)"
                 )
-            if library is None and preset is None:
+            if library is None and preset is None and extended is None:
                 trig = (
                     f", sin and cos of {', '.join(declared)} alone and times each variable"
                     + ("" if angles is not None else " (angles by their names; --angles "

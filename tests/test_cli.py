@@ -167,7 +167,7 @@ def test_identify_picks_the_preset_of_a_vehicle_whose_variables_the_data_name(
     assert "the planar vehicle's preset" in out
     model = load_model(tmp_path / "m.json")
     assert "sin(phi) u1" in model.feature_names and model.n_terms == 7
-    # the same logs with unrelated columns: the preset on its own columns, the others named
+    # the same logs with other columns: the preset with them as states (the rigid body exact)
     rng = np.random.default_rng(0)
     for path in paths:
         lines = open(path).read().splitlines()
@@ -176,8 +176,18 @@ def test_identify_picks_the_preset_of_a_vehicle_whose_variables_the_data_name(
     code, out, err = run_cli(monkeypatch, capsys, "identify", *paths, "--out",
                              str(tmp_path / "m2.json"))  # fmt: skip
     assert code in (0, None), err
-    assert "the other column(s) battery_v, counter are left out" in out
-    assert load_model(tmp_path / "m2.json").n_terms == 7
+    assert "with the other column(s) battery_v, counter as states" in out
+    extended = load_model(tmp_path / "m2.json")
+    rigid = [extended.state_names.index(n) for n in model.state_names]
+    np.testing.assert_allclose(
+        extended.coefficients[rigid][
+            :, [extended.feature_names.index(f) for f in model.feature_names]
+        ],  # fmt: skip
+        model.coefficients,
+        rtol=1e-6,
+        atol=1e-9,
+    )
+    assert np.count_nonzero(extended.coefficients[rigid]) == 7
 
 
 def test_identify_takes_the_rotor_preset_for_rollouts_with_rotor_dynamics(
@@ -206,6 +216,64 @@ def test_identify_takes_the_rotor_preset_for_rollouts_with_rotor_dynamics(
                    strict=True))  # fmt: skip
     assert {k for k, v in lag.items() if v} == {"T2", "Tc2"}
     assert lag["Tc2"] == pytest.approx(40.0, rel=1e-6) and lag["T2"] == pytest.approx(-40.0)
+
+
+def _wind_flights(tmp_path, flights: int = 3, rows: int = 800) -> list[str]:
+    """A planar vehicle (m = 0.5 kg, Ixx = 3e-3) in a wind state w (w' = -0.5 w) that drags
+    it, y_dot' = -2 sin(phi) u1 + 0.4 (w - y_dot), under a PD with held input noise: an
+    independent RK4 (one step per row), written as CSV with w after the inputs."""
+    m, ixx, g, dt = 0.5, 3e-3, 9.81, 0.01
+    rng = np.random.default_rng(7)
+
+    def f(x, u):
+        y, z, phi, yd, zd, pd, w = x
+        return np.array([yd, zd, pd, -u[0] / m * np.sin(phi) + 0.4 * (w - yd),
+                         u[0] / m * np.cos(phi) - g, u[1] / ixx, -0.5 * w])  # fmt: skip
+
+    paths = []
+    for k in range(flights):
+        x = np.array([0, 1, 0, 0, 0, 0, rng.uniform(1, 3) * rng.choice([-1, 1])], dtype=float)
+        rows_out = []
+        for i in range(rows):
+            if i % 150 == 0:
+                ref = rng.uniform([-1, 0.5], [1, 1.5])
+            ay = 2 * (ref[0] - x[0]) - 2 * x[3]
+            az = 4 * (ref[1] - x[1]) - 3 * x[4]
+            phic = np.clip(-ay / g, -0.3, 0.3)
+            u = np.array([m * (g + az) / np.cos(x[2]), ixx * (80 * (phic - x[2]) - 18 * x[5])])
+            u += rng.normal(0, [0.2, 2e-3])
+            rows_out.append([i * dt, *x[:6], *u, x[6]])
+            k1 = f(x, u)
+            k2 = f(x + dt / 2 * k1, u)
+            k3 = f(x + dt / 2 * k2, u)
+            x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + f(x + dt * k3, u))
+        path = tmp_path / f"wind{k}.csv"
+        np.savetxt(path, rows_out, delimiter=",", comments="",
+                   header="t,y,z,phi,y_dot,z_dot,phi_dot,u1,u2,w")  # fmt: skip
+        paths.append(str(path))
+    return paths
+
+
+def test_identify_takes_a_state_beside_a_presets_variables_in(monkeypatch, capsys, tmp_path):
+    """A log of the planar preset's variables and a wind state w that drags the vehicle: w
+    is a state of the library too (a recheck trial's run left it out: 17 % at 1 s, exit 0),
+    and the model is exact."""
+    from identification.model import load_model
+
+    paths = _wind_flights(tmp_path)
+    code, out, err = run_cli(monkeypatch, capsys, "identify", *paths, "--out",
+                             str(tmp_path / "m.json"))  # fmt: skip
+    assert code in (0, None), err
+    assert "with the other column(s) w as states" in out
+    model = load_model(tmp_path / "m.json")
+    row = dict(zip(model.feature_names, model.coefficients[model.state_names.index("y_dot")],
+                   strict=True))  # fmt: skip
+    assert {k for k, v in row.items() if v} == {"w", "y_dot", "sin(phi) u1"}, row
+    assert row["w"] == pytest.approx(0.4, rel=1e-6) and row["y_dot"] == pytest.approx(-0.4)
+    wind = model.coefficients[model.state_names.index("w")]
+    assert np.count_nonzero(wind) == 1 and wind[model.feature_names.index("w")] == pytest.approx(
+        -0.5
+    )
 
 
 def test_simulate_flies_another_vehicle_that_identify_then_recovers(monkeypatch, capsys, tmp_path):
