@@ -529,3 +529,22 @@ def test_rollouts_with_rotor_dynamics_record_the_rotors_and_identify_exactly():
     assert check.max_rel_error < 1e-6
     with pytest.raises(ValueError, match="rotor-thrust states .* has no surrogate env"):
         gym.make("PlanarQuadSINDy-v0", model=model)
+
+
+def test_a_rotor_lag_faster_than_the_step_is_integrated_in_substeps():
+    """tau = 2 ms at 10 ms steps: one RK4 step per period diverged (a recheck trial's thrusts
+    of -1800 N after 3 steps, below the rotor's minimum); the env raises its substeps to
+    dt / tau and follows the exact step response."""
+    env = gym.make("PlanarQuad-v0", params={"rotor_time_constant": 0.002}, trajectory="hover",
+                   effects=["rotor_dynamics"], action_mode="rotor_thrusts")  # fmt: skip
+    assert env.unwrapped.substeps == 5
+    _, info = env.reset(seed=0)
+    t0 = info["rotor_thrusts"]
+    action = 0.9 * env.action_space.high
+    for k in range(1, 4):
+        *_, info = env.step(action)
+        exact = info["rotor_commands"] + (t0 - info["rotor_commands"]) * np.exp(-k * 5.0)
+        np.testing.assert_allclose(info["rotor_thrusts"], exact, rtol=1e-2)
+    # randomised parameters reach (1 - spread) tau: 20 ms at a 60 % spread needs 2 substeps
+    spread = gym.make("PlanarQuad-v0", effects=["rotor_dynamics"], param_randomization=0.6)
+    assert spread.unwrapped.substeps == 2
