@@ -292,6 +292,9 @@ SHIFT_GAIN = 0.9
 """A shift is named only where it leaves at most this share of an equation's residual."""
 
 
+ROUNDOFF_SHARE = 1e-9
+"""A residual under this share of its target's norm is round-off (the shift checks' floor)."""
+
 SHIFT_ROWS = 20_000
 """Rows the shift checks refit on at most (evenly spread blocks of more data): a 6-DOF log of
 1e5 rows spent 30 of its 130 s refitting each state and input shift on all of them."""
@@ -398,7 +401,11 @@ def _own_terms_refit(xi: np.ndarray, names: Sequence[str], window: int, rows: Se
     def residuals(part: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
         g = Gram.stack(grams(part, sub, "rk4", window, xs))
         pairs = [residual_variance(g, i, supports[i]) for i in rows]
-        return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+        rss, sigma2 = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+        # residuals under round-off of the targets are no residuals: a shift that changes
+        # them is no gain (a recheck trial's exact model named "w taken 1 row earlier")
+        floor = (ROUNDOFF_SHARE * g.y_norms[list(rows)]) ** 2
+        return np.maximum(rss, floor), np.maximum(sigma2, floor / max(g.rows, 1))
 
     return residuals
 
