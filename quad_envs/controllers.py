@@ -27,6 +27,13 @@ class PlanarPDGains:
     kv_y: float = 15.0
 
 
+LAG_GAINS_PLANAR = PlanarPDGains(kp_z=16.0, kv_z=8.0, kp_phi=30.0, kv_phi=10.0, kp_y=6.0,
+                                 kv_y=5.0)  # fmt: skip
+"""Planar PD gains for vehicles whose rotors lag: the paper's attitude loop (80, 20) is
+unstable on the Crazyflie with its 0.072 s rotor time constant; these keep it well inside
+1 / tau."""
+
+
 class PlanarPD:
     """The paper's PD controller, linearised about hover.
 
@@ -82,6 +89,15 @@ class Quad6DOFPDGains:
     kv_z: float = 15.0
     kp_att: tuple[float, float, float] = (300.0, 300.0, 60.0)
     kv_att: tuple[float, float, float] = (30.0, 30.0, 12.0)
+
+
+LAG_GAINS_6DOF = Quad6DOFPDGains(
+    kp_xy=2.0, kv_xy=2.5, kp_z=16.0, kv_z=8.0, kp_att=(80.0, 80.0, 10.0),
+    kv_att=(16.0, 16.0, 4.0),
+)  # fmt: skip
+"""6-DOF PD gains for vehicles whose rotors lag: the default attitude loop (300, 30) and
+position loop (20, 8) lose the Crazyflie (tau 0.072 s) within 0.5 to 3 s once the rotors
+lag; the yaw loop is soft so that a yaw sweep does not saturate the rotors."""
 
 
 class Quad6DOFPD:

@@ -548,3 +548,14 @@ def test_a_rotor_lag_faster_than_the_step_is_integrated_in_substeps():
     # randomised parameters reach (1 - spread) tau: 20 ms at a 60 % spread needs 2 substeps
     spread = gym.make("PlanarQuad-v0", effects=["rotor_dynamics"], param_randomization=0.6)
     assert spread.unwrapped.substeps == 2
+
+
+def test_excitation_flights_of_a_lagging_vehicle_fly_softer_gains():
+    """The Crazyflie's rotors lag 0.072 s: the paper's PD gains lost every flight after 62 to
+    274 rows; excitation_rollouts flies the soft gains there (LAG_GAINS) and keeps them up."""
+    from identification.rollouts import LAG_TAU, excitation_rollouts
+
+    assert CRAZYFLIE_6DOF.rotor_time_constant > LAG_TAU
+    kw = {"effects": ["rotor_dynamics"], "vehicle": "crazyflie"}
+    trajs = excitation_rollouts("PlanarQuad-v0", episodes=4, seed=1, env_kwargs=kw, max_tilt=0.6)
+    assert [len(t) for t in trajs] == [1000] * 4

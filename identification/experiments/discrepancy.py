@@ -49,7 +49,14 @@ from identification.libraries import (
 from identification.model import IdentifiedModel
 from identification.rollouts import excitation_rollouts
 from identification.selection import select_model
-from quad_envs.controllers import PlanarPD, PlanarPDGains, Quad6DOFPD, Quad6DOFPDGains
+from quad_envs.controllers import (
+    LAG_GAINS_6DOF,
+    LAG_GAINS_PLANAR,
+    PlanarPD,
+    PlanarPDGains,
+    Quad6DOFPD,
+    Quad6DOFPDGains,
+)
 from quad_envs.dynamics import (
     QUAD6DOF_INPUT_NAMES,
     QUAD6DOF_STATE_NAMES,
@@ -74,9 +81,8 @@ OTHER_VEHICLE = PlanarQuadParams(
     drag_quadratic_xy=0.012, drag_quadratic_z=0.02,
 )  # fmt: skip
 """A third planar vehicle, neither preset: 0.6 kg, unequal drag on both axes, tau = 0.04 s."""
-SOFT_GAINS = PlanarPDGains(kp_z=16.0, kv_z=8.0, kp_phi=30.0, kv_phi=10.0, kp_y=6.0, kv_y=5.0)
-"""PD gains for flights with rotor lag: the paper's attitude loop (80, 20) is unstable on the
-Crazyflie with its 0.072 s rotor time constant; these keep it well inside 1/tau."""
+SOFT_GAINS = LAG_GAINS_PLANAR
+"""PD gains of the planar flights with rotor lag (``controllers.LAG_GAINS_PLANAR``)."""
 
 
 def planar_params(vehicle: str | PlanarQuadParams) -> PlanarQuadParams:
@@ -722,14 +728,8 @@ OTHER_VEHICLE_6DOF = Quad6DOFParams(
 )  # fmt: skip
 """A third 6-DOF vehicle, neither preset nor the paper's: 0.6 kg, '+' frame, unequal drag
 along body z and in the rotor plane, tau = 0.04 s, thrust-to-weight 2.4."""
-GAINS_6DOF = Quad6DOFPDGains(
-    kp_xy=2.0, kv_xy=2.5, kp_z=16.0, kv_z=8.0, kp_att=(80.0, 80.0, 10.0),
-    kv_att=(16.0, 16.0, 4.0),
-)  # fmt: skip
-"""PD gains of the 6-DOF flights (drag and rotor lag alike): the default attitude loop
-(300, 30) and position loop (20, 8) lose the Crazyflie (tau 0.072 s) and the third vehicle
-within 0.5 to 3 s once the rotors lag; the yaw loop is soft so that the yaw sweep does not
-saturate the rotors (the yaw moment arm gamma is 2 mm on the Crazyflie)."""
+GAINS_6DOF = LAG_GAINS_6DOF
+"""PD gains of the 6-DOF flights, drag and rotor lag alike (``controllers.LAG_GAINS_6DOF``)."""
 SPAN_6DOF = 0.5
 """Half-width of the waypoint box [m] (z: half of it around 1 m): tilts up to about 0.45 rad
 (RMS about 0.12 rad) with 1.5 s segments and the input noise."""

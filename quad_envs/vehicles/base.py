@@ -114,11 +114,16 @@ class Vehicle:
         """State at rest on the reference sample ``ref0``."""
         return self.rest_state(ref0)
 
-    def default_controller(self, max_tilt: float | None = None) -> Controller:
-        """The vehicle's feedback law for its parameters (``max_tilt``: its tilt limit [rad])."""
-        if max_tilt is None:
-            return self.controller(self.params)
-        return self.controller(self.params, max_tilt=max_tilt)
+    def default_controller(self, max_tilt: float | None = None, gains: Any = None) -> Controller:
+        """The vehicle's feedback law for its parameters.
+
+        ``max_tilt``: its tilt limit [rad]; ``gains``: its controller's gains (for the
+        controllers that take them).
+        """
+        options: dict[str, Any] = {} if gains is None else {"gains": gains}
+        if max_tilt is not None:
+            options["max_tilt"] = max_tilt
+        return self.controller(self.params, **options)
 
     @property
     def n_states(self) -> int:
