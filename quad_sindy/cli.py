@@ -234,15 +234,22 @@ FLIGHTS_RECORD = "flights.json"
 replaced by a rerun; others are a user's and never are."""
 
 
-def _flights_written(folder: Path) -> set[str]:
-    """The flight files a ``flights.json`` in ``folder`` records (none without one)."""
+def _json_object(path: Path) -> dict | None:
+    """A JSON file's top-level object (None where it is missing, unreadable or no object)."""
     import json
 
     try:
-        files = json.loads((folder / FLIGHTS_RECORD).read_text()).get("files", [])
-    except (OSError, ValueError, AttributeError, RecursionError):
-        return set()
-    return {f for f in files if isinstance(f, str) and re.fullmatch(r"flight_\d+\.csv", f)}
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def _flights_written(folder: Path) -> set[str]:
+    """The flight files a ``flights.json`` in ``folder`` records (none without one)."""
+    files = (_json_object(folder / FLIGHTS_RECORD) or {}).get("files")
+    return {f for f in files if isinstance(f, str) and re.fullmatch(r"flight_\d+\.csv", f)
+            } if isinstance(files, list) else set()  # fmt: skip
 
 
 @app.command()
@@ -343,19 +350,18 @@ def flights(
     if noise > 0:
         trajs = add_noise(trajs, noise, seed=100 + seed)
     out.mkdir(parents=True, exist_ok=True)
+    names = [p.name for p in targets]
+    extra = sorted(ours - set(names))  # an earlier run's further flights: they would mix
     record = {"command": "flights", "system": system, "vehicle": vehicle or "paper",
               "param": list(param or []), "spec": dataclasses.asdict(spec), "noise": noise,
-              "files": [p.name for p in targets]}  # fmt: skip
-    # first: it marks the folder's flights as ours (with those of the earlier run left)
-    record["files"] = sorted({*record["files"], *ours}, key=lambda n: (len(n), n))
-    write_json(out / FLIGHTS_RECORD, record)
+              "files": names + extra}  # fmt: skip
+    write_json(out / FLIGHTS_RECORD, record)  # first: it marks the folder's flights as ours
     for k, tr in enumerate(trajs):
         write_trajectory_csv(out / f"flight_{k}.csv", tr)
-    for name in sorted(set(ours) - {p.name for p in targets}):  # an earlier run's extra
-        (out / name).unlink(missing_ok=True)  # flights: identify OUT/flight_*.csv would mix
-    if ours:
-        record["files"] = [p.name for p in targets]
-        write_json(out / FLIGHTS_RECORD, record)
+    if extra:
+        for name in extra:
+            (out / name).unlink(missing_ok=True)
+        write_json(out / FLIGHTS_RECORD, {**record, "files": names})
     tilts = [j for j, n in enumerate(trajs[0].state_names) if n in ("phi", "theta")]
     flown = max(float(abs(tr.x[:, tilts]).max()) for tr in trajs)
     typer.echo(
@@ -424,15 +430,6 @@ def _looks_like_angle(name: str) -> bool:
     )
 
 
-def _matching_vehicle(state_names: tuple[str, ...], input_names: tuple[str, ...]) -> str | None:
-    """The registered vehicle with a library preset whose variables are exactly these."""
-    from identification.libraries import PRESETS
-    from quad_envs.vehicles import vehicles_with
-
-    # in any column order (the data are then read in the preset's)
-    return next((n for n in vehicles_with(state_names, input_names) if n in PRESETS), None)
-
-
 def _matching_rotor_preset(
     state_names: tuple[str, ...], input_names: tuple[str, ...]
 ) -> str | None:
@@ -473,14 +470,15 @@ def _containing_vehicle(
 ) -> tuple[str | None, tuple[str, ...]]:
     """A preset vehicle whose inputs are these and whose states are among these.
 
-    Returns its name and the other columns, or (None, ()).
+    In any column order. Returns its name and the other columns (none where the variables
+    are exactly its), or (None, ()).
     """
     from identification.libraries import PRESETS
     from quad_envs.vehicles import VEHICLES
 
     for name, record in VEHICLES.items():
         if name in PRESETS and set(record.input_names) == set(input_names):
-            if set(record.state_names) < set(state_names):
+            if set(record.state_names) <= set(state_names):
                 return name, tuple(n for n in state_names if n not in record.state_names)
     return None, ()
 
@@ -612,9 +610,9 @@ def identify(
         taken = first.state_names  # printed with the model: every other column is a state
         extended: list[str] | None = None  # a preset's library with the data's other states
         if preset is None and library is None and angles is None:
-            preset = _matching_vehicle(first.state_names, first.input_names)
             owner, extra = _containing_vehicle(first.state_names, first.input_names)
-            if preset is None and owner is not None:  # its variables and other columns
+            preset = owner if not extra else None  # exactly a preset's variables
+            if extra and states is None:  # a preset's variables and other columns
                 declared = list(PRESET_ANGLES.get(owner, ()))
                 extended = _with_extra_states(owner, extra, declared)
                 library_note = (
@@ -976,13 +974,7 @@ def show(
 
 def _schema_of(path: Path) -> str | None:
     """The ``schema`` field of a JSON model file (None when it has none or is not JSON)."""
-    import json
-
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
-        return None
-    return data.get("schema") if isinstance(data, dict) else None
+    return (_json_object(path) or {}).get("schema")
 
 
 def _number_option(flag: str, text: str, kind: type, low: float, high: float = math.inf) -> Any:
@@ -1236,14 +1228,7 @@ def evaluate_cmd(
 
 def _run_record(agent: Path) -> dict | None:
     """The run record written beside a trained agent (None for agents trained elsewhere)."""
-    import json
-
-    path = agent.with_name("run.json")
-    try:
-        record = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError):
-        return None
-    return record if isinstance(record, dict) else None
+    return _json_object(agent.with_name("run.json"))
 
 
 class EnsembleMode(str, Enum):
