@@ -98,6 +98,16 @@ def _writable_file(path: Path, inputs: tuple | list = (), flag: str = "--out") -
     _writable_folder(path.parent)
 
 
+def _file_name(value: str) -> Path:
+    """Reads a file option's value; a name ending in a separator names a folder, not a file.
+
+    (``Path`` drops the trailing separator: ``--out models/`` would write a file ``models``.)
+    """
+    if value.endswith(("/", os.sep)):
+        raise typer.BadParameter(f"{value} names a folder; give a file name")
+    return Path(value)
+
+
 def _finite(flag: str, value: float, low: float = 0.0, strict: bool = True) -> None:
     """Fails unless ``value`` is finite and above ``low`` (or at least ``low``)."""
     if not (math.isfinite(value) and (value > low if strict else value >= low)):
@@ -157,7 +167,7 @@ def _vehicle_options(vehicle: str | None, param: list[str] | None) -> dict[str, 
 
 @app.command()
 def simulate(
-    out: Annotated[Path, typer.Option(help="CSV file to write")],
+    out: Annotated[Path, typer.Option(help="CSV file to write", parser=_file_name, metavar="FILE")],
     case: Annotated[str, typer.Option(help="A, B, C or a trajectory name")] = "C",
     system: Annotated[SystemName, typer.Option(help="vehicle model")] = SystemName.planar,
     dt: Annotated[float, typer.Option(help="control and sample period [s]")] = 0.01,
@@ -486,7 +496,9 @@ def _containing_vehicle(
 @app.command()
 def identify(
     data: Annotated[list[Path], typer.Argument(help="CSV, parquet or NPZ trajectory files")],
-    out: Annotated[Path, typer.Option(help="model JSON to write")],
+    out: Annotated[
+        Path, typer.Option(help="model JSON to write", parser=_file_name, metavar="FILE")
+    ],
     system: Annotated[
         PresetName | None, typer.Option(help="preset vehicle: its variable names and library")
     ] = None,
@@ -544,7 +556,10 @@ def identify(
             max=100,
         ),
     ] = 0,
-    plot: Annotated[Path | None, typer.Option(help="selection plot (default: OUT.png)")] = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option(help="selection plot (default: OUT.png)", parser=_file_name, metavar="FILE"),
+    ] = None,
 ) -> None:
     """Identifies a SINDy-with-control model from data alone and prints its equations.
 

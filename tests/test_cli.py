@@ -498,6 +498,24 @@ def test_outputs_never_replace_the_data_a_special_file_or_an_earlier_runs_flight
     assert not (tmp_path / "g" / "flight_0.csv").exists()
 
 
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("simulate", "--out"),
+        ("identify", "x.csv", "--out"),
+        ("identify", "x.csv", "--out", "m.json", "--plot"),
+    ],
+)
+def test_a_file_option_ending_in_a_separator_is_refused_not_written_as_a_file(
+    monkeypatch, capsys, tmp_path, args
+):
+    """A fuzz trial's `identify ... --out models/` wrote the model to a file named `models`."""
+    folder = f"{tmp_path / 'models'}{os.sep}"
+    code, _, err = run_cli(monkeypatch, capsys, *args, folder)
+    assert_one_line_error(code, err, args[-1], "names a folder; give a file name")
+    assert not (tmp_path / "models").exists()
+
+
 def test_show_leaves_out_a_selection_record_a_user_edited(monkeypatch, capsys, tmp_path):
     """`show` on a model whose meta.selection lacks its keys raised KeyError (a trial)."""
     import json
