@@ -35,10 +35,12 @@ terms and the data that would fix it.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import functools
 import warnings
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -195,7 +197,12 @@ class Gram:
     @classmethod
     def from_rows(cls, theta: np.ndarray, y: np.ndarray) -> Gram:
         """Factor of explicit rows."""
-        return cls(np.linalg.qr(np.hstack([theta, y]), mode="r"), theta.shape[1], theta.shape[0])
+        # column-major, as LAPACK works: numpy copies other layouts first (7366 x 555 rows:
+        # 0.13 s against 0.16 s)
+        rows = np.empty((theta.shape[0], theta.shape[1] + y.shape[1]), order="F")
+        rows[:, : theta.shape[1]] = theta
+        rows[:, theta.shape[1] :] = y
+        return cls(np.linalg.qr(rows, mode="r"), theta.shape[1], theta.shape[0])
 
     @classmethod
     def stack(cls, parts: Sequence[Gram], weights: Sequence[float] | None = None) -> Gram:
@@ -243,9 +250,12 @@ def _window_mean(rows: np.ndarray, weights: np.ndarray, w: int) -> np.ndarray:
     """Weighted means of w consecutive rows (all overlapping windows)."""
     if w == 1:
         return rows
-    c = np.concatenate([np.zeros((1, rows.shape[1])), np.cumsum(rows * weights[:, None], axis=0)])
+    c = np.zeros((rows.shape[0] + 1, rows.shape[1]), order="F")  # column-major as the rows
+    np.cumsum(rows * weights[:, None], axis=0, out=c[1:])
     cw = np.concatenate([[0.0], np.cumsum(weights)])
-    return (c[w:] - c[:-w]) / (cw[w:] - cw[:-w])[:, None]
+    out = np.subtract(c[w:], c[:-w], order="F")
+    out /= (cw[w:] - cw[:-w])[:, None]
+    return out
 
 
 Stages = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -264,7 +274,14 @@ def _rk4_stage_theta(
     s3 = x + 0.5 * h * k2
     k3 = rhs(s3, um)
     s4 = x + h * k3
-    return (theta(x, u0) + 2 * theta(s2, um) + 2 * theta(s3, um) + theta(s4, u1)) / 6.0
+    out = theta(x, u0)  # summed in place: the (rows, features) arrays are large
+    for stage in (s2, s3):
+        mid = theta(stage, um)
+        mid *= 2.0
+        out += mid
+    out += theta(s4, u1)
+    out /= 6.0
+    return out
 
 
 def rk4_steps(
@@ -355,6 +372,22 @@ def iter_rows(
     Yields:
         Trajectory index, Theta (rows, p) and Y (rows, n) of one chunk.
     """
+    for index, chunk in _row_chunks(trajs, feature_names, derivative, window, xi, chunk_rows):
+        yield index, *chunk()
+
+
+def _row_chunks(
+    trajs: Sequence[Trajectory],
+    feature_names: Sequence[str],
+    derivative: str | BaseDifferentiation,
+    window: int = 1,
+    xi: np.ndarray | None = None,
+    chunk_rows: int | None = None,
+) -> Iterator[tuple[int, Callable[[], tuple[np.ndarray, np.ndarray]]]]:
+    """The chunks of :func:`iter_rows` as (trajectory index, function making its rows).
+
+    The functions are independent of each other (threads may run them in any order).
+    """
     names = (trajs[0].state_names, trajs[0].input_names)
     theta = compile_features(feature_names, *names)
     rhs = compile_rhs(feature_names, xi, *names) if xi is not None else None
@@ -366,8 +399,7 @@ def iter_rows(
         if not isinstance(derivative, str) or derivative in ("central", "smoothed"):
             dx = np.asarray(_differentiator(derivative)(tr.x, tr.t))
             for s in range(0, len(tr), step):
-                rows = theta(tr.x[s : s + step], tr.u[s : s + step])
-                yield index, *_observed_rows(seen[s : s + step], rows, dx[s : s + step])
+                yield index, functools.partial(_derivative_chunk, theta, tr, seen, dx, s, step)
             continue
         if len(tr) <= window:
             raise ValueError(f"a trajectory of {len(tr)} samples is too short for window {window}")
@@ -375,18 +407,42 @@ def iter_rows(
         xs = predict_missing(tr, rhs) if rhs is not None else tr.x
         for s in range(0, n_rows, step):
             stop = min(s + step, n_rows)  # window rows s..stop-1 use samples s..stop-1+window
-            x = xs[s : stop + window - 1]
-            h = np.diff(tr.t[s : stop + window])
-            if derivative == "forward":
-                rows = theta(x, tr.u[s : stop + window - 1])
-            else:
-                stages = tr.stage_inputs(np.arange(s, stop + window - 1))
-                rows = _rk4_stage_theta(theta, rhs, x, stages, h)
-            y = (xs[s + window : stop + window] - xs[s:stop]) / (
-                tr.t[s + window : stop + window] - tr.t[s:stop]
-            )[:, None]
-            keep = seen[s:stop] & seen[s + window : stop + window]
-            yield index, *_observed_rows(keep, _window_mean(rows, h, window), y)
+            yield index, functools.partial(_integral_chunk, theta, rhs, derivative, tr, seen,
+                                           xs, s, stop, window)  # fmt: skip
+
+
+def _derivative_chunk(
+    theta: Callable, tr: Trajectory, seen: np.ndarray, dx: np.ndarray, s: int, step: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Rows s..s+step-1 against estimated derivatives."""
+    rows = theta(tr.x[s : s + step], tr.u[s : s + step])
+    return _observed_rows(seen[s : s + step], rows, dx[s : s + step])
+
+
+def _integral_chunk(
+    theta: Callable,
+    rhs: Callable | None,
+    derivative: str,
+    tr: Trajectory,
+    seen: np.ndarray,
+    xs: np.ndarray,
+    s: int,
+    stop: int,
+    window: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Window rows s..stop-1 of the integral formulation (samples s..stop-1+window)."""
+    x = xs[s : stop + window - 1]
+    h = np.diff(tr.t[s : stop + window])
+    if derivative == "forward":
+        rows = theta(x, tr.u[s : stop + window - 1])
+    else:
+        stages = tr.stage_inputs(np.arange(s, stop + window - 1))
+        rows = _rk4_stage_theta(theta, rhs, x, stages, h)
+    y = (xs[s + window : stop + window] - xs[s:stop]) / (
+        tr.t[s + window : stop + window] - tr.t[s:stop]
+    )[:, None]
+    keep = seen[s:stop] & seen[s + window : stop + window]
+    return _observed_rows(keep, _window_mean(rows, h, window), y)
 
 
 def regression_rows(
@@ -401,6 +457,19 @@ def regression_rows(
     return np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts])
 
 
+WORKERS = 2
+"""Threads that build and factor the regression rows in :func:`grams`."""
+
+
+def _chunk_factor(chunk: Callable[[], tuple[np.ndarray, np.ndarray]]) -> Gram:
+    theta, y = chunk()
+    if not np.isfinite(theta).all():
+        raise ValueError(
+            "the library evaluates to NaN or inf on this data (e.g. sec or tan near 90 deg)"
+        )
+    return Gram.from_rows(theta, y)
+
+
 @serial_blas
 def grams(
     trajs: Sequence[Trajectory],
@@ -409,15 +478,29 @@ def grams(
     window: int = 1,
     xi: np.ndarray | None = None,
 ) -> list[Gram]:
-    """Normal equations of each trajectory, streamed chunk by chunk (memory: one chunk)."""
+    """Normal equations of each trajectory, streamed chunk by chunk (memory: a few chunks).
+
+    :data:`WORKERS` threads build chunks' rows and factor them (numpy's loops and LAPACK
+    release the GIL); the factors are combined in chunk order, so the result is bit for bit
+    that of one chunk after another. One 6-DOF log of 1e5 rows (543 terms) on two cores: a
+    pass 2.1 to 2.4 s -> 1.7 to 1.9 s, the whole ``identify`` 82 s -> 56 s with the
+    column-major rows and in-place sums below.
+    """
     out = [Gram.zeros(len(feature_names), len(trajs[0].state_names)) for _ in trajs]
-    for index, theta, y in iter_rows(trajs, feature_names, derivative, window, xi):
-        if not np.isfinite(theta).all():
-            raise ValueError(
-                "the library evaluates to NaN or inf on this data (e.g. sec or tan near 90 deg)"
-            )
-        part = Gram.from_rows(theta, y)
+    pending: collections.deque[tuple[int, Future]] = collections.deque()
+
+    def combine() -> None:
+        index, future = pending.popleft()
+        part = future.result()
         out[index] = part if out[index].rows == 0 else out[index] + part
+
+    with ThreadPoolExecutor(max_workers=WORKERS) as pool:
+        for index, chunk in _row_chunks(trajs, feature_names, derivative, window, xi):
+            pending.append((index, pool.submit(_chunk_factor, chunk)))
+            if len(pending) > WORKERS:
+                combine()
+        while pending:
+            combine()
     return out
 
 

@@ -80,6 +80,29 @@ def test_compiled_features_equal_pysindy_transform():
     np.testing.assert_allclose(ours, np.asarray(lib.transform(data)), rtol=1e-13, atol=1e-13)
 
 
+def test_factors_streamed_in_two_threads_are_those_of_all_rows_at_once(monkeypatch):
+    """grams() builds and factors chunks in worker threads: combined in chunk order, the
+    factor is bit for bit the one-thread one, and R^T R is Theta^T Theta of every row."""
+    import identification.fit as fit_module
+
+    rng = np.random.default_rng(3)
+    logs = [Trajectory(np.arange(n) * 0.01, 0.3 * rng.standard_normal((n, 6)),
+                       rng.standard_normal((n, 2)), PS, PI) for n in (2600, 1700)]  # fmt: skip
+    names = planar_library()
+    xi = 0.01 * rng.standard_normal((len(PS), len(names)))
+    monkeypatch.setattr(fit_module, "CHUNK_ELEMENTS", 1)  # chunks of 500 rows: 6 and 4
+    two = fit_module.grams(logs, names, "rk4", 4, xi)
+    monkeypatch.setattr(fit_module, "WORKERS", 1)
+    one = fit_module.grams(logs, names, "rk4", 4, xi)
+    assert all(np.array_equal(a.r_aug, b.r_aug) for a, b in zip(two, one, strict=True))
+    for log, factor in zip(logs, two, strict=True):
+        theta, y = fit_module.regression_rows([log], names, "rk4", 4, xi)
+        rows = np.hstack([theta, y])
+        assert factor.rows == len(rows) == len(log) - 4
+        gram = rows.T @ rows
+        assert np.abs(factor.r_aug.T @ factor.r_aug - gram).max() < 1e-12 * np.abs(gram).max()
+
+
 def test_truth_in_the_libraries_is_the_physics_and_torch_matches():
     rng = np.random.default_rng(1)
     for system, rhs, params, n, m in (
