@@ -37,7 +37,7 @@ _EXPORTS = {
     "load_data": "identification.data",
     "FitConfig": "identification.fit",
     "select_model": "identification.selection",
-    "held_out_errors": "identification.selection",
+    "held_out_errors": "identification.scoring",
     "IdentifiedModel": "identification.model",
     "load_model": "identification.model",
     "library_from_spec": "identification.libraries",

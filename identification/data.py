@@ -18,7 +18,7 @@ import io
 import re
 import zipfile
 import zlib
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -80,14 +80,22 @@ class Trajectory:
     measured: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        self.state_names, self.input_names = tuple(self.state_names), tuple(self.input_names)
+        self.state_names = _names(self.state_names, "state_names")
+        self.input_names = _names(self.input_names, "input_names")
         # copies: a caller who changes their array afterwards must not change the data
-        self.t = np.array(_by_name(self.t, None, "t"), dtype=np.float64)
-        self.x = np.atleast_2d(np.array(_by_name(self.x, self.state_names, "x"), dtype=np.float64))
-        self.u = np.atleast_2d(np.array(_by_name(self.u, self.input_names, "u"), dtype=np.float64))
-        for name, arr in (("x", self.x), ("u", self.u)):
-            if arr.ndim != 2:
-                raise ValueError(f"{name} must be 2-D (samples x variables), got shape {arr.shape}")
+        self.t = _numbers(_by_name(self.t, None, "t"), "t")
+        if self.u is None and not self.input_names:  # a system without inputs
+            self.u = np.zeros((self.t.size, 0))
+        for name, names in (("x", self.state_names), ("u", self.input_names)):
+            arr = _numbers(_by_name(getattr(self, name), names, name), name)
+            if arr.ndim == 1 and len(names) == 1 and arr.size == self.t.size:
+                arr = arr[:, None]  # one variable: a plain sequence of its values
+            elif arr.ndim != 2:
+                raise ValueError(
+                    f"{name} must be 2-D (samples x variables: {len(names)} columns for "
+                    f"{list(names)}), got shape {arr.shape}"
+                )
+            setattr(self, name, arr)
         if self.missing is not None:
             self.missing = np.asarray(self.missing, dtype=bool)
             if self.missing.shape != self.t.shape:
@@ -212,6 +220,108 @@ def stage_inputs(
     return u0, um, u1
 
 
+def as_trajectories(data: Any) -> list[Trajectory]:
+    """``data`` as a non-empty list of :class:`Trajectory` (one is a list of one).
+
+    Raises:
+        TypeError: Anything else (arrays or (t, x, u) tuples: wrap them in a Trajectory).
+        ValueError: No trajectories.
+    """
+    if isinstance(data, Trajectory):
+        return [data]
+    if isinstance(data, str | bytes | np.ndarray) or not isinstance(data, Iterable):
+        raise TypeError(
+            "the data are Trajectory objects (identification.Trajectory(t, x, u, state_names, "
+            f"input_names)) or a list of them, got {type(data).__name__} (files: load_data)"
+        )
+    items = list(data)
+    wrong = [type(item).__name__ for item in items if not isinstance(item, Trajectory)]
+    if wrong:
+        raise TypeError(
+            f"the data hold {wrong[0]} objects, not Trajectory: wrap each log as "
+            "identification.Trajectory(t, x, u, state_names, input_names)"
+        )
+    if not items:
+        raise ValueError("no trajectories to fit")
+    return items
+
+
+GLITCH_SPREADS = 10.0
+"""A sample further than this many times its state's spread from the line through its two
+neighbours is a glitch (:func:`check_glitches`)."""
+
+
+def check_glitches(trajs: Sequence[Trajectory]) -> None:
+    """Refuses, in one line, data with a sample that cannot be the state it names.
+
+    A sample further from the straight line through its two neighbours than
+    :data:`GLITCH_SPREADS` times its state's spread (the larger of 1.4826 MAD and 1 % of the
+    standard deviation) is a glitch: sampled motion bends by far less between two rows (a
+    wrapped angle jumps by about 2 spreads, a counter's reset by 1.5). One such sample gave
+    ``y' = -28.8 y`` in a trial. :func:`clean`, which the command line runs on every log,
+    marks such rows missing first.
+
+    Raises:
+        ValueError: Naming the trajectory, sample, state and value.
+    """
+    for i, tr in enumerate(trajs):
+        seen = np.flatnonzero(tr.observed)
+        if seen.size < 5:
+            continue
+        x, t = tr.x[seen], tr.t[seen]
+        weight = ((t[1:-1] - t[:-2]) / (t[2:] - t[:-2]))[:, None]
+        off = np.abs(x[1:-1] - ((1 - weight) * x[:-2] + weight * x[2:]))
+        mad = 1.4826 * np.median(np.abs(x - np.median(x, axis=0)), axis=0)
+        spread = np.maximum(np.maximum(mad, 1e-2 * x.std(axis=0)), 1e-300)
+        ratio = off / spread
+        row, col = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+        if ratio[row, col] > GLITCH_SPREADS:
+            sample = int(seen[row + 1])
+            raise ValueError(
+                f"trajectory {i}, sample {sample}: {tr.state_names[col]} = "
+                f"{tr.x[sample, col]:.6g} lies {ratio[row, col]:.3g} times its spread off "
+                "its neighbours (a glitch?): identification.clean() marks such rows missing "
+                "(the command line does so when it reads a log)"
+            )
+
+
+def _names(names: Any, what: str) -> tuple[str, ...]:
+    """Variable names as a tuple of strings that can name variables in equations."""
+    if isinstance(names, str):
+        raise ValueError(
+            f"{what} must be a sequence of names, got the string {names!r} (a list: "
+            f"[{names!r}] for one name)"
+        )
+    if names is None:
+        raise ValueError(f"{what} must be a sequence of names, got None (() for none)")
+    names = tuple(names)
+    bad = [n for n in names if not isinstance(n, str) or not re.fullmatch(r"[A-Za-z_]\w*", n)]
+    if bad:
+        raise ValueError(
+            f"{what} {bad} cannot name variables in equations (strings of letters, digits and "
+            "_, not starting with a digit)"
+        )
+    return names
+
+
+def _numbers(values: Any, what: str) -> np.ndarray:
+    """A float64 copy of ``values``, refusing what is not real numbers (complex, text, bool)."""
+    if values is None:
+        raise ValueError(f"{what} is None: give an array of numbers")
+    arr = np.asarray(values)
+    if arr.dtype.kind in "bcUSVMm" or (arr.dtype.kind == "O" and arr.size and any(
+        isinstance(v, str | bytes | bool | complex) for v in arr.ravel()[:1000]
+    )):  # fmt: skip
+        kind = {"b": "booleans", "c": "complex numbers", "M": "dates", "m": "durations"}.get(
+            arr.dtype.kind, "text or other objects"
+        )
+        raise ValueError(f"{what} holds {kind}, not real numbers")
+    try:
+        return np.array(arr, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{what} cannot be read as numbers: {exc}") from None
+
+
 def _by_name(values: Any, names: tuple[str, ...] | None, what: str) -> Any:
     """A table's columns in the order of ``names`` (a DataFrame's labels are not ignored).
 
@@ -310,6 +420,15 @@ def validate(traj: Trajectory) -> None:
         if bad.any():
             row = int(np.argwhere(bad)[0][0])
             raise ValueError(f"{name} contains NaN or infinite values (first at sample {row})")
+        huge = np.abs(arr) > OVERFLOWING
+        if name != "t" and huge.any():
+            row, col = (int(i) for i in np.argwhere(huge)[0])
+            column = (traj.state_names if name == "x" else traj.input_names)[col]
+            raise ValueError(
+                f"{name} holds {arr[row, col]:.3g} at sample {row} ({column}): beyond "
+                f"{OVERFLOWING:g} no library term is a finite number (a lost value? clean() "
+                "drops such rows)"
+            )
     steps = np.diff(t)
     if np.any(steps <= 0):
         raise ValueError(

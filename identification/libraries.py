@@ -506,6 +506,11 @@ def library_from_spec(
         fields = _parse_spec_text(spec)
         fields.setdefault("angles", tuple(angles))
         return LibrarySpec(**fields).build(state_names, input_names)  # type: ignore[arg-type]
+    if not isinstance(spec, Sequence | np.ndarray) or not all(isinstance(n, str) for n in spec):
+        raise ValueError(
+            "a library is a preset name, a spec string, a TOML path, a LibrarySpec or a list "
+            f"of term names, got {type(spec).__name__} {str(spec)[:80]!r}"
+        )
     names = [term_name(parse_term(n, variables)) for n in spec]
     return list(dict.fromkeys(names))
 

@@ -245,6 +245,9 @@ class IdentifiedModel:
         inputs = np.atleast_2d(inputs)
         if x0.shape != (len(self.state_names),):
             raise ValueError(f"x0 must have shape ({len(self.state_names)},), got {x0.shape}")
+        for name, values in (("x0", x0), ("inputs", inputs)):
+            if not np.all(np.isfinite(values)):
+                raise ValueError(f"{name} holds NaN or infinite values: every state would be NaN")
         if inputs.shape[1] != len(self.input_names):
             raise ValueError(
                 f"inputs must have {len(self.input_names)} columns, got {inputs.shape}"

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from identification.data import Trajectory
+from identification.data import Trajectory, as_trajectories
 from identification.features import compile_rhs
 from identification.fit import (
     rk4_steps,
@@ -242,8 +242,9 @@ def held_out_errors(
         ValueError: The data have other variables than the model, or no segment is long
             enough.
     """
-    if not isinstance(steps, int | np.integer) or steps < 1:
+    if isinstance(steps, bool) or not isinstance(steps, int | np.integer) or steps < 1:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
+    trajs = as_trajectories(trajs)
     names = (model.state_names, model.input_names)
     if any((t.state_names, t.input_names) != names for t in trajs):
         raise ValueError(f"the data's variables are not the model's {names[0]} / {names[1]}")

@@ -64,14 +64,20 @@ from __future__ import annotations
 import dataclasses
 import io
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from identification.data import IdentificationWarning, Trajectory, data_ranges
+from identification.data import (
+    IdentificationWarning,
+    Trajectory,
+    as_trajectories,
+    check_glitches,
+    data_ranges,
+)
 from identification.diagnostics import (
     angle_offset_note,
     cut_steps,
@@ -87,7 +93,7 @@ from identification.diagnostics import (
     state_bias_note,
     state_shift_note,
 )
-from identification.features import compile_rhs, parse_term, term_name
+from identification.features import compile_rhs
 from identification.fit import (
     TALLY,
     FitConfig,
@@ -380,20 +386,20 @@ def select_model(
     """
     from tqdm import tqdm
 
-    if isinstance(trajs, Trajectory):
-        trajs = [trajs]
-    if not trajs:
-        raise ValueError("no trajectories to fit")
+    trajs = as_trajectories(trajs)
+    check_glitches(trajs)
     first = trajs[0]
     if any((t.state_names, t.input_names) != (first.state_names, first.input_names) for t in trajs):
         raise ValueError("all trajectories must have the same state and input names")
     _check_settings(folds, lambdas, windows, horizon, n_models)
-    if isinstance(library, str):  # a preset or a spec ("planar", "degree=2;angles=phi")
-        library = library_from_spec(library, first.state_names, first.input_names)
-    if library is None or len(library) == 0:
+    if config is not None and not isinstance(config, FitConfig):
+        raise TypeError(f"config must be a FitConfig, got {type(config).__name__}")
+    if library is None:
         raise ValueError("the library is empty: give feature names, a preset or a spec")
-    variables = [*first.state_names, *first.input_names]
-    names = [term_name(parse_term(n, variables)) for n in library]
+    # a preset, a spec ("degree=2;angles=phi") or terms (canonical, each once)
+    names = library_from_spec(library, first.state_names, first.input_names)
+    if not names:
+        raise ValueError("the library is empty: give feature names, a preset or a spec")
     base = config or FitConfig(optimizer="stepwise")
     TALLY.counts.clear()
     one_step = Gram.stack(grams(trajs, names, "forward", 1))
@@ -657,6 +663,10 @@ def _check_settings(
         raise ValueError(f"horizon must be a positive integer of steps, got {horizon!r}")
     if not whole(n_models) or n_models < 0:
         raise ValueError(f"n_models must be a non-negative integer, got {n_models!r}")
+    for name, value in (("lambdas", lambdas), ("windows", windows)):
+        if isinstance(value, str) or not isinstance(value, Iterable):
+            raise ValueError(f"{name} must be a sequence of numbers ([{value!r}] for one), got "
+                             f"{value!r}")  # fmt: skip
     values = np.asarray(list(lambdas), dtype=float)
     if values.size == 0 or not np.all(np.isfinite(values) & (values >= 0)):
         raise ValueError(f"lambdas must be one or more finite numbers >= 0, got {lambdas!r}")

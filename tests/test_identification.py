@@ -164,12 +164,52 @@ def test_authors_file_loads_with_columns(reference_case_c, tmp_path):
         (lambda t, x, u: (t[::-1], x, u), "increasing"),
         (lambda t, x, u: (np.concatenate([t[:5], t[4:-1]]), x, u), "strictly increasing"),
         (lambda t, x, u: (t, x[:, :5], u), "columns"),
+        # an API trial's: values numpy would have turned into floats, or kept as huge ones
+        (lambda t, x, u: (t, x + 0j, u), "x holds complex numbers"),
+        (lambda t, x, u: (t, x, u > 0), "u holds booleans"),
+        (lambda t, x, u: (t, x.astype(str), u), "x holds text"),
+        (lambda t, x, u: (t, np.where(x == x[9, 1], 1e200, x), u), "1e\\+200 at sample 9 \\(z\\)"),
+        (lambda t, x, u: (t, x[:, 0], u), "x must be 2-D .* 6 columns"),
     ],
 )
 def test_bad_data_raises_clear_errors(case_c, mutate, message):
     t, x, u = mutate(case_c.t + 1.0, case_c.x, case_c.u)
     with pytest.raises(ValueError, match=message):
         Trajectory(t, x, u, PS, PI)
+
+
+@pytest.mark.parametrize(
+    "states,message",
+    [
+        ("yz", "a sequence of names, got the string 'yz'"),
+        (["1", "z"], r"\['1'\] cannot name variables"),  # the constant term's name
+        (["y pos", "z"], "cannot name variables"),
+        ([3, "z"], r"\[3\] cannot name variables"),
+        (None, "got None"),
+    ],
+)
+def test_names_that_cannot_name_variables_are_refused_when_the_trajectory_is_built(states, message):
+    t = np.arange(5) * 0.1
+    with pytest.raises(ValueError, match=message):
+        Trajectory(t, np.ones((5, 2)), np.ones((5, 1)), states, ["u1"])
+
+
+def test_one_variable_may_be_a_plain_sequence_and_no_inputs_may_be_none():
+    t = np.arange(5) * 0.1
+    one = Trajectory(t, np.ones((5, 2)), [1.0, 2.0, 3.0, 4.0, 5.0], ["a", "b"], ["f"])
+    assert one.u.shape == (5, 1) and one.u[3, 0] == 4.0
+    free = Trajectory(t, np.ones(5), None, ["a"], [])
+    assert free.x.shape == (5, 1) and free.u.shape == (5, 0)
+    with pytest.raises(ValueError, match="u is None"):
+        Trajectory(t, np.ones((5, 2)), None, ["a", "b"], ["f"])
+
+
+def test_every_name_the_package_exports_resolves():
+    """An API trial: identification.held_out_errors raised AttributeError (wrong module)."""
+    import identification
+
+    for name in identification.__all__:
+        assert getattr(identification, name) is not None, name
 
 
 def test_jittery_time_is_accepted_and_each_row_uses_its_own_step(case_c):

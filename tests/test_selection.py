@@ -54,6 +54,38 @@ def test_selection_finds_the_exact_model_of_another_vehicle(other_clean):
     assert not any("error of holding the state" in w for w in report.warnings)
 
 
+def test_the_api_refuses_what_it_cannot_use_in_one_line(other_clean):
+    """An API trial: (t, x, u) tuples, a bare lambda, a dict config and a 1e6 glitch gave
+    AttributeError, TypeError, or a fitted y' = -28.8 y; a term listed twice was refused as
+    collinear. Each is now named (or, the twice-listed term, taken once)."""
+    from identification import Trajectory, held_out_errors
+
+    tuples = [(tr.t, tr.x, tr.u) for tr in other_clean]
+    cases = [
+        ((tuples, "planar"), {}, "hold tuple objects, not Trajectory"),
+        ((other_clean[0].x, "planar"), {}, "got ndarray"),
+        (([], "planar"), {}, "no trajectories"),
+        ((other_clean, "planar"), {"lambdas": 0.1}, r"lambdas must be a sequence .*\[0.1\]"),
+        ((other_clean, "planar"), {"config": {"lam": 1}}, "config must be a FitConfig, got dict"),
+        ((other_clean, 3), {}, "a library is a preset name.*got int"),
+    ]
+    for args, kwargs, message in cases:
+        with pytest.raises((TypeError, ValueError), match=message):
+            select_model(*args, **kwargs)
+    glitched = [Trajectory(tr.t, tr.x.copy(), tr.u, PS, PI) for tr in other_clean]
+    glitched[1].x[40, 0] = 1e6
+    with pytest.raises(ValueError, match="trajectory 1, sample 40: y = 1e\\+06 lies"):
+        select_model(glitched, "planar")
+    terms = ["y_dot", "y_dot", *planar_library()]
+    model, _ = select_model(other_clean, terms, **FAST)
+    assert check_support(model, truth_planar(OTHER_PLANAR)).exact_support
+    assert list(model.feature_names) == list(dict.fromkeys(terms))
+    # one trajectory is data too, as in select_model; and NaN is no start of a simulation
+    assert held_out_errors(model, other_clean[0], 20).relative.max() < 1e-6
+    with pytest.raises(ValueError, match="x0 holds NaN"):
+        model.simulate(np.full(6, np.nan), other_clean[0].u, 0.01)
+
+
 def test_selection_on_solve_ivp_data_of_a_heavy_vehicle():
     trajs = planar_flights(
         HEAVY_PLANAR, FlightSpec(flights=3, steps=600, integrator="solve_ivp", seed=3)
