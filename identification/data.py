@@ -256,10 +256,11 @@ def check_glitches(trajs: Sequence[Trajectory]) -> None:
 
     A sample further from the straight line through its two neighbours than
     :data:`GLITCH_SPREADS` times its state's spread (the larger of 1.4826 MAD and 1 % of the
-    standard deviation) is a glitch: sampled motion bends by far less between two rows (a
-    wrapped angle jumps by about 2 spreads, a counter's reset by 1.5). One such sample gave
-    ``y' = -28.8 y`` in a trial. :func:`clean`, which the command line runs on every log,
-    marks such rows missing first.
+    standard deviation), and twice as far as they are from theirs (a displaced sample: its
+    neighbours are off by half as much the other way; a jump, an impact's or a wrapped
+    angle's, puts two rows off by the same), is a glitch: sampled motion bends by far less
+    between two rows. One such sample gave ``y' = -28.8 y`` in a trial. :func:`clean`, which
+    the command line runs on every log, marks such rows missing first.
 
     Raises:
         ValueError: Naming the trajectory, sample, state and value.
@@ -274,6 +275,10 @@ def check_glitches(trajs: Sequence[Trajectory]) -> None:
         mad = 1.4826 * np.median(np.abs(x - np.median(x, axis=0)), axis=0)
         spread = np.maximum(np.maximum(mad, 1e-2 * x.std(axis=0)), 1e-300)
         ratio = off / spread
+        beside = np.zeros_like(off)  # the larger of the neighbours' own distances
+        beside[1:-1] = np.maximum(off[:-2], off[2:])
+        ratio[off < 1.5 * beside] = 0.0
+        ratio[[0, -1]] = 0.0  # a row at either end has one neighbour to compare with
         row, col = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
         if ratio[row, col] > GLITCH_SPREADS:
             sample = int(seen[row + 1])

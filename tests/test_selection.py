@@ -59,6 +59,7 @@ def test_the_api_refuses_what_it_cannot_use_in_one_line(other_clean):
     AttributeError, TypeError, or a fitted y' = -28.8 y; a term listed twice was refused as
     collinear. Each is now named (or, the twice-listed term, taken once)."""
     from identification import Trajectory, held_out_errors
+    from identification.data import check_glitches
 
     tuples = [(tr.t, tr.x, tr.u) for tr in other_clean]
     cases = [
@@ -76,6 +77,11 @@ def test_the_api_refuses_what_it_cannot_use_in_one_line(other_clean):
     glitched[1].x[40, 0] = 1e6
     with pytest.raises(ValueError, match="trajectory 1, sample 40: y = 1e\\+06 lies"):
         select_model(glitched, "planar")
+    # a jump is no glitch: a landing's velocity, -2 m/s to 0 in one step (two rows off alike)
+    landing = glitched[1].x.copy()
+    landing[:, 4] = np.where(np.arange(len(landing)) < 300, -2.0, 0.0)
+    landing[40, 0] = landing[39, 0]
+    check_glitches([Trajectory(glitched[1].t, landing, glitched[1].u, PS, PI)])
     terms = ["y_dot", "y_dot", *planar_library()]
     model, _ = select_model(other_clean, terms, **FAST)
     assert check_support(model, truth_planar(OTHER_PLANAR)).exact_support
