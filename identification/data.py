@@ -259,11 +259,12 @@ def check_glitches(trajs: Sequence[Trajectory]) -> None:
 
     A sample further from the straight line through its two neighbours than
     :data:`GLITCH_SPREADS` times its state's spread (the larger of 1.4826 MAD, 1 % of the
-    standard deviation and round-off of the values), and twice as far as they are from theirs (a displaced sample: its
-    neighbours are off by half as much the other way; a jump, an impact's or a wrapped
-    angle's, puts two rows off by the same), is a glitch: sampled motion bends by far less
-    between two rows. One such sample gave ``y' = -28.8 y`` in a trial. :func:`clean`, which
-    the command line runs on every log, marks such rows missing first.
+    standard deviation and round-off of the values), and twice as far as they are from
+    theirs (a displaced sample: its neighbours are off by half as much the other way; a
+    jump, an impact's or a wrapped angle's, puts two rows off by the same), is a glitch:
+    sampled motion bends by far less between two rows. One such sample gave
+    ``y' = -28.8 y`` in a trial. :func:`clean`, which the command line runs on every log,
+    marks such rows missing first.
 
     Raises:
         ValueError: Naming the trajectory, sample, state and value.

@@ -128,6 +128,7 @@ from identification.support import (
     resolve_collinear,
     restart_centred,
     significance_bar,
+    unsplit_twins,
 )
 from quad_envs.fileio import jsonable
 
@@ -560,6 +561,7 @@ def select_model(
     twins, covered = indistinguishable_twins(xi, final_gram, names, first.state_names,
                                              best.window)  # fmt: skip
     report.warnings += [note for key, note in resolved.items() if key not in covered] + twins
+    report.warnings += unsplit_twins(xi, final_gram, ratio, names, first.state_names)
     std = prob = None
     if n_models > 0:
         xi, std, prob, held, dropped = _bootstrap(used, names, final_cfg, xi, n_models, seed,

@@ -701,4 +701,87 @@ def indistinguishable_twins(
     return notes, covered
 
 
+NEAR_COS = 0.99
+"""Two columns at |cos| above this on the data are near twins (the pool of
+:func:`grow_significant`; above 0.999 it never puts such a pair together)."""
+
+
+def unsplit_twins(
+    xi: np.ndarray,
+    gram: Gram,
+    ratio: np.ndarray,
+    feature_names: Sequence[str],
+    state_names: Sequence[str],
+) -> list[str]:
+    """Warnings for chosen terms whose dropped near twin the data cannot rule out beside them.
+
+    For a pair of near twins (|cos| > :data:`NEAR_COS`) neither of which is the other times
+    further factors (``f1 sin(phi)`` and ``f2 sin(phi)``), no simpler term is preferred (the
+    rule of :func:`resolve_collinear`), and the model holding one without the other is a
+    choice the data must make: the support with the dropped twin beside the kept term is
+    fitted, and its fit with the twin held at :data:`TWIN_KEEP` of the kept term's weight
+    (the smallest share that makes it a second term: unit columns, the pair reinforcing) is
+    compared with it. Where that costs no more than the F-test's bar (p = 0.001), in residual
+    variances of the pair's fit times the long-run ratio (as the pruning counts them), the
+    data cannot tell the kept term alone from the two sharing its weight, and one warning per
+    kept term names each such twin. A trial's planar quad with per-rotor thrusts flown by a
+    PD controller (f1 ~ f2, |cos| 0.9997) kept `vx' = -3.34 f1 sin(th)` for
+    `-1.667 (f1 + f2) sin(th)` in 4 runs without a word: the half share cost 0.0004 to
+    1.8 variances, the twin's entry 7 to 17 (under the bar of 18.3 for a term).
+
+    Returns:
+        The warnings.
+    """
+    terms = [set(parse_term(n)) for n in feature_names]
+    a = gram.r / np.maximum(gram.col_norms, 1e-300)
+    cos = a.T @ a
+    np.fill_diagonal(cos, 0.0)
+    usable = np.einsum("ij,ij->j", a, a) > 0.5
+    bar = significance_bar(gram.p)
+    notes = []
+    for i, state in enumerate(state_names):
+        support = [int(j) for j in np.flatnonzero(xi[i])]
+        if not support:
+            continue
+        b = gram.z[:, i]
+        scale = max(float(ratio[i]), 1.0)
+        rss_now = least_squares(a, b, support)[0]
+        found = []
+        for kept in support:
+            for other in np.flatnonzero((np.abs(cos[kept]) > NEAR_COS) & usable):
+                other = int(other)
+                if other in support or terms[kept] <= terms[other] or terms[other] <= terms[kept]:
+                    continue
+                pair, sigma2 = residual_variance(gram, i, [*support, other])
+                sigma2 *= scale
+                if not sigma2 > 0:
+                    continue
+                shared = a[:, kept] + TWIN_KEEP * np.sign(cos[kept, other]) * a[:, other]
+                rest = [c for c in support if c != kept]
+                m = np.column_stack([a[:, rest], shared])
+                resid = b - m @ np.linalg.lstsq(m, b, rcond=None)[0]
+                cost = (float(resid @ resid) - pair) / sigma2
+                if cost <= F_CRITICAL:
+                    coef = refit_support(gram, i, [*support, other])
+                    found.append((kept, other, abs(cos[kept, other]), cost,
+                                  (rss_now - pair) / sigma2, coef[kept], coef[other]))  # fmt: skip
+        for kept in dict.fromkeys(f[0] for f in found):
+            mine = [f for f in found if f[0] == kept]
+            listed = "; ".join(
+                f"{_term_list(feature_names, [o])} (|cos| = {c:.6f}: the half share costs "
+                f"{cost:.3g}, the twin's entry explains {gain:.3g}; together "
+                f"{ck:.4g} and {co:.4g})"
+                for _, o, c, cost, gain, ck, co in mine
+            )
+            notes.append(
+                f"{state}': kept {_term_list(feature_names, [kept])} without its near "
+                f"twin{'s' if len(mine) > 1 else ''} on this data, and the data cannot tell "
+                f"it alone from the two sharing its weight: {listed} (residual variances, "
+                f"x {scale:.3g} for the residual's correlation over the window; with the twin "
+                f"at half its weight the F-test needs {F_CRITICAL} against the pair's fit, "
+                f"a term {bar:.3g}); the model may hold one term for two"
+            )
+    return notes
+
+
 # -- the entry point --------------------------------------------------------------------

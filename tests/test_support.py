@@ -325,3 +325,50 @@ def test_near_twin_rotor_terms_both_enter_and_a_cancelling_or_noise_twin_does_no
                      (a[:, 0] + 0.02 * a[:, 1] + 1e-4 * noise, [0])):  # small  # fmt: skip
         total = float(b @ b)
         assert support.add_reinforcing_twins(a, b, [0], usable, twin, bar, total, n) == added
+
+
+def test_one_rotor_for_two_is_named_where_the_data_cannot_split_the_pair():
+    """PD flights with per-rotor thrusts (f1 ~ f2): `f1 sin(phi)` and `f2 sin(phi)` are near
+    twins that both belong in `y_dot'`. At sigma = 1e-2 the fit keeps one rotor with twice the
+    coefficient (the twin's entry is under the bar for a term), and no warning named the pair
+    (the twin rule only took pairs where one term is the other times more factors). Now a
+    warning names both where the data cannot tell the kept term alone from the two sharing
+    its weight; a twin the data rule out is not named."""
+    from identification.experiments.synthetic import FlightSpec, add_noise, planar_flights
+    from identification.fit import Gram
+    from identification.selection import select_model
+    from identification.support import unsplit_twins
+
+    data = []
+    spec = FlightSpec(flights=4, steps=600, excitation=0.0, seed=2)
+    for tr in add_noise(planar_flights(OTHER_PLANAR, spec), 1e-2, 2):
+        u1, u2 = tr.u[:, 0], tr.u[:, 1] / OTHER_PLANAR.arm_length
+        data.append(Trajectory(tr.t, tr.x, np.column_stack([(u1 - u2) / 2, (u1 + u2) / 2]),
+                               tr.state_names, ["f1", "f2"]))  # fmt: skip
+    with pytest.warns(UserWarning):
+        model, report = select_model(data, "degree=2;angles=phi", n_models=0)
+    row = model.coefficients[model.state_names.index("y_dot")]
+    kept = {model.feature_names[j] for j in np.flatnonzero(row)}
+    rotors = {"f1 sin(phi)", "f2 sin(phi)"}
+    assert kept & rotors
+    if not rotors <= kept:  # one rotor for two: a warning must name the pair
+        named = [w for w in report.warnings if w.startswith("y_dot'")
+                 and all(f"'{t}'" in w for t in rotors)]  # fmt: skip
+        assert len(named) == 1 and "sharing its weight" in named[0]
+
+    # the same pair in isolation: named where the noise hides the split, not where it shows
+    rng = np.random.default_rng(0)
+    n = 4000
+    s = rng.standard_normal(n)
+    theta = np.column_stack([s, s + 0.03 * rng.standard_normal(n)])
+    names = ["f1 sin(phi)", "f2 sin(phi)"]
+    xi = np.array([[-2.0, 0.0]])
+    for sigma, warned in ((1.0, True), (0.02, False)):
+        y = -(theta[:, 0] + theta[:, 1]) if warned else -2.0 * theta[:, 0]
+        y = y + sigma * rng.standard_normal(n)
+        gram = Gram.from_rows(theta, y[:, None])
+        notes = unsplit_twins(xi, gram, np.ones(1), names, ["s"])
+        assert len(notes) == int(warned)
+    # a pair where one term is the other times more factors is the simpler-twin rule's
+    notes = unsplit_twins(xi, gram, np.ones(1), ["u1", "cos(phi) u1"], ["s"])
+    assert notes == []
