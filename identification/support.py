@@ -701,6 +701,13 @@ def indistinguishable_twins(
     return notes, covered
 
 
+SHARED = 0.25
+"""An unsplit twin is named only where the free fit of the pair gives it at least this part of
+their weight (on unit columns, reinforcing): the data's own estimate then shares it. Measured:
+a per-rotor quad's `f1 sin(th)` / `f2 sin(th)` at 0.34 to 0.55 (four runs at sigma = 1e-2),
+the 6-DOF presets' small-angle trig twins (`cos(psi) cos(theta) u` / `cos(phi) cos(psi) u`) at
+0.18 and below on a noisy flight set, where nine notes named such pairs without it."""
+
 NEAR_COS = 0.99
 """Two columns at |cos| above this on the data are near twins (the pool of
 :func:`grow_significant`; above 0.999 it never puts such a pair together)."""
@@ -723,9 +730,10 @@ def unsplit_twins(
     (the smallest share that makes it a second term: unit columns, the pair reinforcing) is
     compared with it. Where that costs no more than the F-test's bar (p = 0.001), in residual
     variances of the pair's fit times the long-run ratio (as the pruning counts them), the
-    data cannot tell the kept term alone from the two sharing its weight, and one warning per
-    kept term names each such twin. A trial's planar quad with per-rotor thrusts flown by a
-    PD controller (f1 ~ f2, |cos| 0.9997) kept `vx' = -3.34 f1 sin(th)` for
+    data cannot tell the kept term alone from the two sharing its weight; where the pair's
+    free fit also gives the twin a reinforcing :data:`SHARED` part of their weight, one
+    warning per kept term names each such twin. A trial's planar quad with per-rotor thrusts
+    flown by a PD controller (f1 ~ f2, |cos| 0.9997) kept `vx' = -3.34 f1 sin(th)` for
     `-1.667 (f1 + f2) sin(th)` in 4 runs without a word: the half share cost 0.0004 to
     1.8 variances, the twin's entry 7 to 17 (under the bar of 18.3 for a term).
 
@@ -733,7 +741,8 @@ def unsplit_twins(
         The warnings.
     """
     terms = [set(parse_term(n)) for n in feature_names]
-    a = gram.r / np.maximum(gram.col_norms, 1e-300)
+    norms = gram.col_norms
+    a = gram.r / np.maximum(norms, 1e-300)
     cos = a.T @ a
     np.fill_diagonal(cos, 0.0)
     usable = np.einsum("ij,ij->j", a, a) > 0.5
@@ -761,8 +770,13 @@ def unsplit_twins(
                 m = np.column_stack([a[:, rest], shared])
                 resid = b - m @ np.linalg.lstsq(m, b, rcond=None)[0]
                 cost = (float(resid @ resid) - pair) / sigma2
-                if cost <= F_CRITICAL:
-                    coef = refit_support(gram, i, [*support, other])
+                if cost > F_CRITICAL:
+                    continue
+                coef = refit_support(gram, i, [*support, other])
+                # on unit columns, the twin's part of the pair's weight in the free fit
+                mine, theirs = coef[kept] * norms[kept], coef[other] * norms[other]
+                share = abs(theirs) / max(abs(mine) + abs(theirs), 1e-300)
+                if share >= SHARED and np.sign(theirs) * np.sign(cos[kept, other]) == np.sign(mine):
                     found.append((kept, other, abs(cos[kept, other]), cost,
                                   (rss_now - pair) / sigma2, coef[kept], coef[other]))  # fmt: skip
         for kept in dict.fromkeys(f[0] for f in found):
