@@ -1051,6 +1051,7 @@ def fit_coefficients(
     feature_names: Sequence[str],
     config: FitConfig,
     start: np.ndarray | None = None,
+    last_rows: list[Gram] | None = None,
 ) -> np.ndarray:
     """Xi for one configuration: the formulation's fixed point (no identifiability check).
 
@@ -1062,6 +1063,10 @@ def fit_coefficients(
             points (default: a forward-difference fit). An accurate start saves the passes
             whose stage points are still O(dt) off, which are the slow ones: their residual
             keeps the sparse path going to its longest support.
+        last_rows: A list that receives the last pass's factor of each trajectory (the rows
+            whose solution the returned Xi is: for ``rk4``, at the stage points of the Xi
+            before it), so that a caller needs no pass of its own over the data (left empty
+            with the ``ensemble`` optimizer, which fits explicit rows).
     """
     names = list(feature_names)
     is_ensemble = config.optimizer == "ensemble" or isinstance(
@@ -1074,7 +1079,10 @@ def fit_coefficients(
         if is_ensemble:
             return sparse_regression(*regression_rows(trajs, names, derivative, cfg.window, xi),
                                      cfg)  # fmt: skip
-        return solve(Gram.stack(grams(trajs, names, derivative, cfg.window, xi)), cfg, names)
+        factors = grams(trajs, names, derivative, cfg.window, xi)
+        if last_rows is not None:
+            last_rows[:] = factors
+        return solve(Gram.stack(factors), cfg, names)
 
     if config.derivative != "rk4":
         return one(config.derivative, None)

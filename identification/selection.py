@@ -452,9 +452,12 @@ def select_model(
     for w in windows:
         pilot_cfg = dataclasses.replace(base, lam=pilot_lam, window=w, iterations=2,
                                         full_path=True)  # fmt: skip
-        pilot = fit_coefficients(long_enough(units, w), names, pilot_cfg, pilot)
+        # the candidates' rows are the pilot's last pass's (the stage points of the pilot
+        # before its last step, which changes it little): no pass of their own
+        rows: list[Gram] = []
+        pilot = fit_coefficients(long_enough(units, w), names, pilot_cfg, pilot, rows)
         pilots[w] = pilot
-        fitted = iter(grams(long_enough(units, w), names, base.derivative, w, pilot))
+        fitted = iter(rows or grams(long_enough(units, w), names, base.derivative, w, pilot))
         unit_grams = [next(fitted) if len(u) > w else Gram.zeros(len(names), len(first.state_names))
                       for u in units]  # fmt: skip
         # candidates are the forward paths; the chosen one is refitted with the backward check
@@ -533,8 +536,11 @@ def select_model(
     validated = len(report.warnings)  # the notes below describe the checks' model
     final_cfg = dataclasses.replace(base, lam=best.lam, window=best.window)
     used = long_enough(trajs, best.window)  # the segments this window's rows come from
-    xi = fit_coefficients(used, names, final_cfg, pilots[best.window])
-    final_gram = Gram.stack(grams(used, names, "rk4", best.window, xi))
+    rows: list[Gram] = []
+    xi = fit_coefficients(used, names, final_cfg, pilots[best.window], rows)
+    if base.derivative != "rk4" or not rows:  # else the last pass's rows: xi solves them
+        rows = grams(used, names, "rk4", best.window, xi)
+    final_gram = Gram.stack(rows)
     ratio = long_run_ratio(used, names, xi, best.window)
     path_xi = xi
 
