@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -506,12 +507,17 @@ def library_from_spec(
         fields = _parse_spec_text(spec)
         fields.setdefault("angles", tuple(angles))
         return LibrarySpec(**fields).build(state_names, input_names)  # type: ignore[arg-type]
-    if not isinstance(spec, Sequence | np.ndarray) or not all(isinstance(n, str) for n in spec):
+    if isinstance(spec, os.PathLike):
+        return library_from_spec(os.fspath(spec), state_names, input_names, angles)
+    unordered = isinstance(spec, set | frozenset)
+    terms = list(spec) if isinstance(spec, Iterable) and not unordered else None
+    if terms is None or not all(isinstance(n, str) for n in terms):
+        hint = " (a set has no order: give a list)" if unordered else ""
         raise ValueError(
             "a library is a preset name, a spec string, a TOML path, a LibrarySpec or a list "
-            f"of term names, got {type(spec).__name__} {str(spec)[:80]!r}"
+            f"of term names, got {type(spec).__name__} {str(spec)[:80]!r}{hint}"
         )
-    names = [term_name(parse_term(n, variables)) for n in spec]
+    names = [term_name(parse_term(n, variables)) for n in terms]
     return list(dict.fromkeys(names))
 
 

@@ -392,6 +392,7 @@ def select_model(
     first = trajs[0]
     if any((t.state_names, t.input_names) != (first.state_names, first.input_names) for t in trajs):
         raise ValueError("all trajectories must have the same state and input names")
+    lambdas, windows = _settings_lists(lambdas, windows)
     _check_settings(folds, lambdas, windows, horizon, n_models)
     if config is not None and not isinstance(config, FitConfig):
         raise TypeError(f"config must be a FitConfig, got {type(config).__name__}")
@@ -657,6 +658,18 @@ def _warned(
     return model, report
 
 
+def _settings_lists(lambdas: Any, windows: Any) -> tuple[Any, Any]:
+    """The grids as lists (a generator or an array is read once), or unchanged to be refused."""
+
+    def grid(value: Any) -> Any:
+        scalar = isinstance(value, np.ndarray) and value.ndim == 0
+        if isinstance(value, str) or not isinstance(value, Iterable) or scalar:
+            return value
+        return list(value)
+
+    return grid(lambdas), grid(windows)
+
+
 def _check_settings(
     folds: int, lambdas: Sequence[float], windows: Sequence[int], horizon: int, n_models: int
 ) -> None:
@@ -672,7 +685,8 @@ def _check_settings(
     if not whole(n_models) or n_models < 0:
         raise ValueError(f"n_models must be a non-negative integer, got {n_models!r}")
     for name, value in (("lambdas", lambdas), ("windows", windows)):
-        if isinstance(value, str) or not isinstance(value, Iterable):
+        if isinstance(value, str) or not isinstance(value, Iterable) or np.ndim(value) == 0:
+            # (a 0-d array is iterable to isinstance, not to a loop)
             raise ValueError(f"{name} must be a sequence of numbers ([{value!r}] for one), got "
                              f"{value!r}")  # fmt: skip
     values = np.asarray(list(lambdas), dtype=float)

@@ -101,9 +101,9 @@ def _writable_file(path: Path, inputs: tuple | list = (), flag: str = "--out") -
 def _file_name(value: str) -> Path:
     """Reads a file option's value; a name ending in a separator names a folder, not a file.
 
-    (``Path`` drops the trailing separator: ``--out models/`` would write a file ``models``.)
+    (``Path`` drops a trailing separator or ``/.``: ``--out models/`` wrote a file ``models``.)
     """
-    if value.endswith(("/", os.sep)):
+    if value.endswith(("/", os.sep)) or os.path.basename(value) in ("", ".", ".."):
         raise typer.BadParameter(f"{value} names a folder; give a file name")
     return Path(value)
 

@@ -506,11 +506,13 @@ def test_outputs_never_replace_the_data_a_special_file_or_an_earlier_runs_flight
         ("identify", "x.csv", "--out", "m.json", "--plot"),
     ],
 )
+@pytest.mark.parametrize("ending", [os.sep, f"{os.sep}."])
 def test_a_file_option_ending_in_a_separator_is_refused_not_written_as_a_file(
-    monkeypatch, capsys, tmp_path, args
+    monkeypatch, capsys, tmp_path, args, ending
 ):
-    """A fuzz trial's `identify ... --out models/` wrote the model to a file named `models`."""
-    folder = f"{tmp_path / 'models'}{os.sep}"
+    """A fuzz trial's `identify ... --out models/` wrote the model to a file named `models`
+    (a recheck trial's `models/.` too)."""
+    folder = f"{tmp_path / 'models'}{ending}"
     code, _, err = run_cli(monkeypatch, capsys, *args, folder)
     assert_one_line_error(code, err, args[-1], "names a folder; give a file name")
     assert not (tmp_path / "models").exists()

@@ -198,8 +198,12 @@ def test_one_variable_may_be_a_plain_sequence_and_no_inputs_may_be_none():
     t = np.arange(5) * 0.1
     one = Trajectory(t, np.ones((5, 2)), [1.0, 2.0, 3.0, 4.0, 5.0], ["a", "b"], ["f"])
     assert one.u.shape == (5, 1) and one.u[3, 0] == 4.0
-    free = Trajectory(t, np.ones(5), None, ["a"], [])
-    assert free.x.shape == (5, 1) and free.u.shape == (5, 0)
+    for none in (None, []):
+        free = Trajectory(t, np.ones(5), none, ["a"], [])
+        assert free.x.shape == (5, 1) and free.u.shape == (5, 0)
+    with pytest.raises(ValueError, match="u holds booleans"):
+        Trajectory(t, np.ones((5, 2)), np.array([np.bool_(True)] * 5, dtype=object), ["a", "b"],
+                   ["f"])  # fmt: skip
     with pytest.raises(ValueError, match="u is None"):
         Trajectory(t, np.ones((5, 2)), None, ["a", "b"], ["f"])
 
