@@ -553,7 +553,8 @@ def select_model(
     xi, notes = restart_centred(xi, final_gram, ratio, names, first.state_names,
                                 (best.lam, ratio_of))  # fmt: skip
     report.warnings += notes
-    xi, notes = grow_significant(xi, final_gram, ratio, names, first.state_names)
+    ratio = ratio.copy()  # the pruning's: an equation grown by a twin takes the pair's
+    xi, notes = grow_significant(xi, final_gram, ratio, names, first.state_names, ratio_of)
     report.warnings += notes
     wider = [w for w in sorted(windows) if w > best.window and long_enough(used, w)]
     if wider:

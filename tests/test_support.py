@@ -372,3 +372,29 @@ def test_one_rotor_for_two_is_named_where_the_data_cannot_split_the_pair():
     # a pair where one term is the other times more factors is the simpler-twin rule's
     notes = unsplit_twins(xi, gram, np.ones(1), ["u1", "cos(phi) u1"], ["s"])
     assert notes == []
+
+
+def test_a_twin_kept_out_by_the_ratio_of_the_residual_without_it_is_measured_by_its_own():
+    """The long-run ratio is measured on the path's residual; where that lacks a true twin,
+    its smooth signal inflates the ratio (a trial's one-rotor residual: 51.7 against the
+    pair's 10.3) and the raised bar kept the twin out. The pair's own ratio admits it, and
+    the pruning after gets that ratio."""
+    from identification.fit import Gram
+    from identification.support import grow_significant
+
+    rng = np.random.default_rng(0)
+    n = 4000
+    s = rng.standard_normal(n)
+    theta = np.column_stack([s, s + 0.03 * rng.standard_normal(n)])
+    y = -(theta[:, 0] + theta[:, 1]) + 0.2 * rng.standard_normal(n)
+    gram = Gram.from_rows(theta, y[:, None])
+    names = ["f1 sin(phi)", "f2 sin(phi)"]
+    start = np.array([[-2.0, 0.0]])
+    ratio = np.array([20.0])  # the one-term residual's, inflated by the missing twin
+    xi, _ = grow_significant(start.copy(), gram, ratio, names, ["s"])
+    assert np.count_nonzero(xi) == 1 and ratio[0] == 20.0  # the raised bar keeps it out
+    asked = []
+    xi, _ = grow_significant(start.copy(), gram, ratio, names, ["s"],
+                             lambda i, row: asked.append(row) or 1.0)  # fmt: skip
+    assert np.all(xi != 0) and np.allclose(xi, -1.0, atol=0.15) and ratio[0] == 1.0
+    assert len(asked) == 1 and np.all(asked[0] != 0)  # asked once, for the pair
