@@ -443,6 +443,13 @@ def significance_bar(p: int) -> float:
     return float(chi2.isf(PRUNE_P / max(p, 1), 1))
 
 
+def _unit_columns(gram: Gram) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The factor's columns scaled to unit norm, their cosines, and which are not all zero."""
+    a = gram.r / np.maximum(gram.col_norms, 1e-300)
+    g = a.T @ a
+    return a, g, np.diag(g) > 0.5  # (an all-zero column has norm 0)
+
+
 def grow_significant(
     xi: np.ndarray,
     gram: Gram,
@@ -481,12 +488,10 @@ def grow_significant(
 
     bar = significance_bar(gram.p)
     moves_bar = bar  # the exchange-and-add bar, for a support of the size it grew from
-    a = gram.r / np.maximum(gram.col_norms, 1e-300)
-    g = a.T @ a
+    a, g, usable = _unit_columns(gram)
     cos = np.abs(g)
     np.fill_diagonal(cos, 0.0)
     near, twin = cos > 0.99, cos > 0.999
-    usable = np.diag(g) > 0.5  # unit columns (an all-zero column has norm 0)
     xi = xi.copy()
     notes = []
     for i, state in enumerate(state_names):
@@ -765,10 +770,8 @@ def unsplit_twins(
     """
     terms = [set(parse_term(n)) for n in feature_names]
     norms = gram.col_norms
-    a = gram.r / np.maximum(norms, 1e-300)
-    cos = a.T @ a
+    a, cos, usable = _unit_columns(gram)
     np.fill_diagonal(cos, 0.0)
-    usable = np.einsum("ij,ij->j", a, a) > 0.5
     bar = significance_bar(gram.p)
     notes = []
     for i, state in enumerate(state_names):
