@@ -659,16 +659,17 @@ def _warned(
     return model, report
 
 
-def _settings_lists(lambdas: Any, windows: Any) -> tuple[Any, Any]:
-    """The grids as lists (a generator or an array is read once), or unchanged to be refused."""
+def _settings_lists(lambdas: Any, windows: Any) -> tuple[list, list]:
+    """The grids as lists (a generator or an array is read once); a single value is refused."""
 
-    def grid(value: Any) -> Any:
-        scalar = isinstance(value, np.ndarray) and value.ndim == 0
+    def grid(name: str, value: Any) -> list:
+        scalar = isinstance(value, np.ndarray) and value.ndim == 0  # iterable to isinstance
         if isinstance(value, str) or not isinstance(value, Iterable) or scalar:
-            return value
+            raise ValueError(f"{name} must be a sequence of numbers ([{value!r}] for one), got "
+                             f"{value!r}")  # fmt: skip
         return list(value)
 
-    return grid(lambdas), grid(windows)
+    return grid("lambdas", lambdas), grid("windows", windows)
 
 
 def _check_settings(
@@ -685,11 +686,6 @@ def _check_settings(
         raise ValueError(f"horizon must be a positive integer of steps, got {horizon!r}")
     if not whole(n_models) or n_models < 0:
         raise ValueError(f"n_models must be a non-negative integer, got {n_models!r}")
-    for name, value in (("lambdas", lambdas), ("windows", windows)):
-        if isinstance(value, str) or not isinstance(value, Iterable) or np.ndim(value) == 0:
-            # (a 0-d array is iterable to isinstance, not to a loop)
-            raise ValueError(f"{name} must be a sequence of numbers ([{value!r}] for one), got "
-                             f"{value!r}")  # fmt: skip
     values = np.asarray(list(lambdas), dtype=float)
     if values.size == 0 or not np.all(np.isfinite(values) & (values >= 0)):
         raise ValueError(f"lambdas must be one or more finite numbers >= 0, got {lambdas!r}")
