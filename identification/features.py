@@ -219,11 +219,20 @@ def _header(
     return lines, index
 
 
-def _finish(lines: list[str], exprs: list[str], xp: Any) -> None:
-    """Defines ``one`` if used, then stacks the expressions into (..., k)."""
+def _finish(lines: list[str], exprs: list[str], xp: Any, into: bool = False) -> None:
+    """Defines ``one`` if used, then stacks the expressions into (..., k).
+
+    ``into`` (numpy): each expression is written into the output as it is computed, so the
+    columns are not all held at once before they are stacked (a library of 519 terms on
+    7,700 rows: 32 MB at the peak instead of 64).
+    """
     if any("one" in e for e in exprs):
         lines.insert(1 if xp is np else 4, "    one = xp.ones_like(X[0])")
-    if xp is np:
+    if xp is np and into:
+        lines.append(f"    out = xp.empty(({len(exprs)},) + xp.shape(X[0]))")
+        lines.extend(f"    out[{j}] = {e}" for j, e in enumerate(exprs))
+        lines.append("    return out.T")
+    elif xp is np:
         lines.append(f"    return xp.array(({', '.join(exprs)},)).T")
     else:
         lines.append(f"    return xp.stack(xp.broadcast_tensors({', '.join(exprs)}), -1)")
@@ -248,7 +257,7 @@ def compile_features(
     lines, index = _header(state_names, input_names, xp)
     cache: dict[str, str] = {}
     exprs = [_term_expr(t, index, cache, lines) for t in terms]
-    _finish(lines, exprs, xp)
+    _finish(lines, exprs, xp, into=True)
     return _build("theta", lines, xp)
 
 

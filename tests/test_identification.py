@@ -103,6 +103,53 @@ def test_factors_streamed_in_two_threads_are_those_of_all_rows_at_once(monkeypat
         assert np.abs(factor.r_aug.T @ factor.r_aug - gram).max() < 1e-12 * np.abs(gram).max()
 
 
+def test_compiled_features_keep_the_batch_shape_and_windows_are_weighted_means():
+    """Theta of one state, of rows and of a (2, 20) batch agree; the integral window's rows
+    are the h-weighted means of w consecutive rows, computed here by a plain loop."""
+    import identification.fit as fit_module
+
+    rng = np.random.default_rng(4)
+    names = planar_library()
+    theta = compile_features(names, PS, PI)
+    x, u = rng.standard_normal((40, 6)), rng.standard_normal((40, 2))
+    rows = theta(x, u)
+    assert rows.shape == (40, len(names))
+    np.testing.assert_array_equal(theta(x[7], u[7]), rows[7])
+    np.testing.assert_array_equal(theta(x.reshape(2, 20, 6), u.reshape(2, 20, 2)),
+                                  rows.reshape(2, 20, -1))  # fmt: skip
+    h, w = rng.uniform(0.5, 1.5, 40), 5
+    loop = [np.average(rows[i : i + w], axis=0, weights=h[i : i + w]) for i in range(36)]
+    np.testing.assert_allclose(fit_module._window_mean(rows.copy(), h, w), loop, rtol=1e-12)
+
+
+def test_a_chunk_of_rows_holds_about_two_chunk_sized_arrays_at_its_peak(monkeypatch):
+    """Memory of the streamed fit: building one chunk's RK4 rows of the 6-DOF library (four
+    stages, the window means) and factoring them peaks near two arrays of the chunk's size,
+    not four (temporaries freed as they go; tracemalloc sees numpy's allocations)."""
+    import tracemalloc
+
+    import identification.fit as fit_module
+    from quad_envs.dynamics import QUAD6DOF_INPUT_NAMES, QUAD6DOF_STATE_NAMES
+
+    rng = np.random.default_rng(5)
+    names, n = quad6dof_library(), len(QUAD6DOF_STATE_NAMES)
+    log = Trajectory(np.arange(2001) * 0.01, 0.2 * rng.standard_normal((2001, n)),
+                     rng.standard_normal((2001, 4)), QUAD6DOF_STATE_NAMES,
+                     QUAD6DOF_INPUT_NAMES)  # fmt: skip
+    xi = np.zeros((n, len(names)))
+    xi[np.arange(n), rng.choice(len(names), n)] = 0.01  # a quick compile; stages all move
+    monkeypatch.setattr(fit_module, "WORKERS", 1)
+    monkeypatch.setattr(fit_module, "CHUNK_ELEMENTS", 2000 * len(names))  # one chunk
+    chunk = (2000 - 16) * (len(names) + n) * 8
+    tracemalloc.start()
+    try:
+        fit_module.grams([log], names, "rk4", 16, xi)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2.75 * chunk, peak / chunk  # 4.1 before the temporaries were freed
+
+
 def test_truth_in_the_libraries_is_the_physics_and_torch_matches():
     rng = np.random.default_rng(1)
     for system, rhs, params, n, m in (
