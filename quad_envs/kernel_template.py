@@ -131,7 +131,9 @@ def step(X, A, refs, P, C, rng, gust, bias, mix, unmix, box, frac, obsbox, xbox,
     """Steps every active member in place, writing obs, reward, end, u_app, u_cmd.
 
     ``work`` is a (8, w) scratch array, w >= the extended state, action, rotor and wind
-    sizes. Returns False (and steps nothing) if an action is not finite.
+    sizes; on return ``work[5, :k]`` holds the limited rotor commands of the last member
+    stepped (the single env's ``info['rotor_commands']``). Returns False (and steps
+    nothing) if an action is not finite.
     """
     b = X.shape[0]
     m, k = mix.shape

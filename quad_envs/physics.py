@@ -469,7 +469,9 @@ def _all_finite(A):  # noqa: ANN001, ANN202
 def command_batch(A, P, C, mix, unmix, box, frac, u_app, u_cmd, work):  # noqa: ANN001, ANN201
     """Rotor commands -> applied and commanded collective inputs (written).
 
-    For a vector field integrated in Python. Returns False if an action is not finite.
+    For a vector field integrated in Python. As in the step kernel, ``work[5, :k]`` holds
+    the last member's limited rotor commands on return. Returns False if an action is not
+    finite.
     """
     b = A.shape[0]
     m, k = mix.shape

@@ -660,7 +660,9 @@ class QuadrotorEnv(_EnvCore, gym.Env):
                 self.render()
         info = self._info(ref, u[0], u_cmd[0])
         if self._rotor_state:
-            info["rotor_commands"] = self._rotor_commands(a.reshape(1, -1))[0]
+            # the step kernels leave the (one) member's limited rotor commands in their
+            # scratch row 5; recomputing them took 0.7 us of an 11 us step
+            info["rotor_commands"] = self._work_array[5, : self._k].copy()
         info["out_of_bounds"] = terminated
         if self._range is not None:
             info["outside_training"] = float(self._outside(info["state"], u[0]))
