@@ -390,8 +390,16 @@ def _holds(term: Term, part: Term) -> bool:
     return all(have.get(key(f), 0) >= f.k for f in part)
 
 
+_LIST_KEYS = ("angles", "extra", "drag", "functions", "multipliers", "exclude")
+"""Spec keys whose value is a list of names: comma-separated, or the key given again."""
+
+
 def _parse_spec_text(text: str) -> dict[str, object]:
-    """``degree=2;angles=phi,theta;extra=u1 sin(phi),y_dot^3`` -> a dict for LibrarySpec."""
+    """``degree=2;angles=phi,theta;extra=u1 sin(phi),y_dot^3`` -> a dict for LibrarySpec.
+
+    A list key given again adds to its list (``extra=a;extra=b`` is ``extra=a,b``: the docs'
+    own commands wrote it so, and only the last one counted).
+    """
     out: dict[str, object] = {}
     items = [p.strip() for p in text.split(";") if p.strip()]
     if not items:  # (an empty --library was a library without angles, silently)
@@ -405,9 +413,16 @@ def _parse_spec_text(text: str) -> dict[str, object]:
                 f"library spec item {item!r} is not key=value (items are separated by ';'); "
                 f"a preset is one of {', '.join(dict.fromkeys([*PRESETS, *VEHICLES]))}"
             )
-        if key.strip() in out:  # (the last one won, silently)
-            raise ValueError(f"library spec gives {key.strip()!r} twice: give it once")
-        out[key.strip()] = value.strip()
+        key = key.strip()
+        if key in out and key in _LIST_KEYS:
+            out[key] = f"{out[key]},{value.strip()}"
+            continue
+        if key in out:  # (the last one won, silently)
+            raise ValueError(
+                f"library spec gives {key!r} twice: give it once (lists such as extra take "
+                "names separated by ',')"
+            )
+        out[key] = value.strip()
     return _check_fields(out, "library spec")
 
 
@@ -437,7 +452,7 @@ def _check_fields(fields: dict[str, object], source: str) -> dict[str, object]:
             if not isinstance(value, bool):
                 raise ValueError(f"{source}: {key} must be true or false, got {value!r}")
             out[key] = value
-        elif key in ("angles", "extra", "drag", "functions", "multipliers", "exclude"):
+        elif key in _LIST_KEYS:
             items = value.split(",") if isinstance(value, str) else value
             if not isinstance(items, list | tuple) or not all(isinstance(v, str) for v in items):
                 raise ValueError(

@@ -351,6 +351,21 @@ def test_motor_speed_flights_give_the_exact_model_with_trig_degree_2():
     assert all(abs(found[k] / truth[k] - 1) < 1e-4 for k in truth)
 
 
+def test_a_list_key_given_again_adds_to_its_list_and_a_number_given_again_is_refused():
+    """The docs wrote ``extra=a;extra=b`` (four motors' terms), and only the last counted;
+    a trial found it refused later. A list key given again now adds to its list."""
+    names, inputs = ["z", "vz", "roll", "pitch"], ["m1", "m2"]
+    again = library_from_spec("degree=1;extra=m1^2 cos(roll);extra=m2^2 cos(roll);"
+                              "exclude=z;exclude=vz", names, inputs)  # fmt: skip
+    commas = library_from_spec("degree=1;extra=m1^2 cos(roll),m2^2 cos(roll);exclude=z,vz",
+                               names, inputs)  # fmt: skip
+    assert again == commas
+    assert canon("m1^2 cos(roll)") in again and canon("m2^2 cos(roll)") in again
+    assert "z" not in again and "vz" not in again
+    with pytest.raises(ValueError, match="gives 'degree' twice.*separated by ','"):
+        library_from_spec("degree=1;degree=2", names, inputs)
+
+
 def test_exclude_drops_every_built_term_holding_a_factor_and_keeps_extra_terms():
     names = library_from_spec("degree=3;exclude=qw^2,px,1;extra=px qw^2", ["px", "qw", "vx"], [])
     full = library_from_spec("degree=3", ["px", "qw", "vx"], [])
