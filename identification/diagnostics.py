@@ -230,8 +230,53 @@ def disagreement_note(
     long-run ratio of its own refit's residual): per-term tests missed a 1.0 / 1.3 kg pair
     at sigma = 1e-2 in hover, where `1`, `f1 cos(phi)` and `f2 cos(phi)` are nearly
     collinear within each log and only their combination differs. The worst equation is
-    named with its most spread term. A library that lacks a term varying between the logs
-    does the same, so the note names both causes.
+    named with the term whose spread moves the target most (its coefficient's range times
+    the column's RMS; a trial's note named a spurious stand-in, `sin(phi) z`, whose range
+    was large only against its small pooled value, not the thrust gain that differed). A
+    library that lacks a term varying between the logs does the same, so the note names
+    both causes.
+
+    Where the logs agree, the first and second halves of each log are compared the same
+    way: a battery that sags alike in every flight moved `u2` from 242 to 221 between the
+    halves of each of a trial's three logs, and no note had said so.
+    """
+    found = _disagreeing(trajs, names, window, xi)
+    if found:
+        count, i, j, low, high, more = found
+        return (
+            f"the logs disagree: refitted on each of {count} segments alone, "
+            f"{trajs[0].state_names[i]}' differs beyond what their noise allows ('{names[j]}' "
+            f"from {low:.4g} to {high:.4g}){_others(more)}: the library lacks a term that "
+            "varies between the logs, or logs of different vehicles (payloads, batteries) "
+            "were pooled, which no one model fits (identify each vehicle's logs on its own)"
+        )
+    halves = [part for tr in trajs for part in (tr.slice(0, len(tr) // 2),
+                                                tr.slice(len(tr) // 2, len(tr)))]  # fmt: skip
+    found = _disagreeing(long_enough(halves, 4 * window), names, window, xi)
+    if not found:
+        return None
+    count, i, j, low, high, more = found
+    return (
+        f"the halves of the logs disagree: refitted on each of {count} half-logs alone, "
+        f"{trajs[0].state_names[i]}' differs beyond what their noise allows ('{names[j]}' "
+        f"from {low:.4g} to {high:.4g}){_others(more)}: a parameter drifts within the flights "
+        "(a battery that sags, fuel or a payload that changes), or the library lacks a term "
+        "that changes along them; no one model fits both halves"
+    )
+
+
+def _others(more: int) -> str:
+    return f" (and {more} other equation(s))" if more else ""
+
+
+def _disagreeing(
+    trajs: Sequence[Trajectory], names: Sequence[str], window: int, xi: np.ndarray
+) -> tuple | None:
+    """The segments' disagreement of :func:`disagreement_note`, or None.
+
+    Returns:
+        (segments compared, state, term, lowest and highest refit of the term, other
+        equations that disagree).
     """
     from scipy.stats import chi2
 
@@ -241,7 +286,7 @@ def disagreement_note(
         return None
     parts = grams(list(trajs), list(names), "rk4", window, xi)
     supports = [[int(j) for j in np.flatnonzero(row)] for row in xi]
-    fits = []  # per segment and equation: (coefficients, precision, normal matrix, target)
+    fits = []  # per segment and equation: coefficients, precision, normal matrix, target, rows
     for tr, g in zip(trajs, parts, strict=True):
         if g.rows < max(5 * max(len(s) for s in supports), MIN_UNIT_ROWS):
             continue
@@ -252,7 +297,7 @@ def disagreement_note(
             sigma2 = residual_variance(g, i, support)[1] * float(ratio[i])
             normal = g.r[:, support].T @ g.r[:, support]
             total = float(np.linalg.norm(g.r_aug[:, g.p + i]) ** 2)
-            per.append((own[i, support], normal / max(sigma2, 1e-300), normal, total))
+            per.append((own[i, support], normal / max(sigma2, 1e-300), normal, total, g.rows))
         fits.append(per)
     if len(fits) < 2:
         return None
@@ -268,21 +313,13 @@ def disagreement_note(
         targets = sum(f[i][3] for f in fits)
         bar = chi2.isf(DISAGREE_P / xi.shape[0], len(support) * (len(fits) - 1))
         if chi > bar and lost > DISAGREE_SHARE * targets:
-            spread = (est.max(axis=0) - est.min(axis=0)) / np.maximum(np.abs(pooled), 1e-300)
-            k = int(np.argmax(spread))
+            rms = np.sqrt(np.mean([np.diag(f[i][2]) / f[i][4] for f in fits], axis=0))
+            k = int(np.argmax((est.max(axis=0) - est.min(axis=0)) * rms))
             found.append((chi / bar, i, support[k], est[:, k].min(), est[:, k].max()))
     if not found:
         return None
     _, i, j, low, high = max(found)
-    states = trajs[0].state_names
-    more = f" (and {len(found) - 1} other equation(s))" if len(found) > 1 else ""
-    return (
-        f"the logs disagree: refitted on each of {len(fits)} segments alone, {states[i]}' "
-        f"differs beyond what their noise allows ('{names[j]}' from {low:.4g} to "
-        f"{high:.4g}){more}: the library lacks a term that varies between the logs, or logs "
-        "of different vehicles (payloads, batteries) were pooled, which no one model fits "
-        "(identify each vehicle's logs on its own)"
-    )
+    return len(fits), i, j, low, high, len(found) - 1
 
 
 INPUT_SHIFTS = (-3, -2, -1, 1, 2, 3)

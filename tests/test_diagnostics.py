@@ -305,6 +305,28 @@ def test_logs_of_two_vehicles_pooled_are_named_and_one_vehicles_noisy_logs_are_n
     assert note is not None and "z_dot' differs" in note, note
 
 
+def test_a_gain_that_drifts_alike_in_every_log_is_named_from_the_halves(other_clean):
+    """A battery that sags alike in every flight: the logged inputs overstate the applied
+    ones by a factor that grows to 1 / 0.85 over each log. The logs agree with each other
+    (a trial: no note), so their halves are compared: the note names the drift and an input
+    term, whose refits move by about the sag, not a stand-in; the unsagged logs get none."""
+    from identification.diagnostics import disagreement_note
+    from identification.experiments.truth import truth_matrix
+
+    names = planar_library()
+    exact = truth_matrix(truth_planar(OTHER_PLANAR), PS, names)
+    sag = [1 - 0.15 * (tr.t - tr.t[0]) / np.ptp(tr.t) for tr in other_clean]
+    sagged = [dataclasses.replace(tr, u=tr.u / s[:, None])
+              for tr, s in zip(other_clean, sag, strict=True)]  # fmt: skip
+    assert disagreement_note(other_clean, names, 4, exact) is None
+    note = disagreement_note(sagged, names, 4, exact)
+    assert note is not None and note.startswith("the halves of the logs disagree"), note
+    term = note.split("('")[1].split("'")[0]
+    assert term in ("cos(phi) u1", "sin(phi) u1", "u2"), note
+    low, high = (float(v) for v in note.split("' from ")[1].split(")")[0].split(" to "))
+    assert 1.05 < high / low < 1.25  # the halves' mean gains differ by about 10 %
+
+
 def test_a_model_records_its_training_range_and_score_names_data_beyond_it(tmp_path, other_clean):
     """Cross-validation tests a model only where its flights went; a held-out flight past
     that (a trial: yaw beyond the training range, 17.5 % at 1 s) is named by ``score``."""
