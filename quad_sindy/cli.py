@@ -547,6 +547,17 @@ def identify(
             "reported"
         ),
     ] = False,
+    prewhiten: Annotated[
+        bool | None,
+        typer.Option(
+            "--prewhiten/--no-prewhiten",
+            help="fit rows prewhitened for equation errors correlated in time (unmeasured "
+            "forces such as wind, which a controller answers, bias a plain fit; window 1); "
+            "default: tried where the errors are, and kept unless it needs more than two "
+            "extra terms",
+            show_default=False,
+        ),
+    ] = None,
     input_shift: Annotated[
         int,
         typer.Option(
@@ -728,9 +739,11 @@ def identify(
                         f"--window {window_value} does not fit the data: windows must be under "
                         f"a quarter of the typical segment ({typical_length(trajs)} rows)"
                     )
+                if prewhiten is None and window_value not in (None, 1):
+                    prewhiten = False  # a prewhitened fit is at window 1: the window asked
                 model, report = select_model(
                     trajs, lib, config=config, windows=windows, system=label, progress=True,
-                    drop_outliers=drop_outliers,
+                    drop_outliers=drop_outliers, prewhiten=prewhiten,
                 )  # fmt: skip
                 noted = ()  # printed with the report
                 best = report.best
@@ -753,6 +766,8 @@ def identify(
             else:
                 if drop_outliers:
                     _fail("--drop-outliers works with the automatic selection (--lambda auto)")
+                if prewhiten:
+                    _fail("--prewhiten works with the automatic selection (--lambda auto)")
                 config = dataclasses.replace(config, lam=lam_value, window=window_value or 1)
                 trajs, stamped = stamp_jitter(trajs, lib)  # as select_model reads them
                 if stamped:

@@ -88,6 +88,10 @@ def ppo_zip(tmp_path_factory):
         (["identify", "{csv}", "--out", "{tmp}/m.json", "--library", ""], ["--library is empty"]),
         (["identify", "{csv}", "--out", "{tmp}/m.json", "--states", ","], ["names no column"]),
         (["identify", "{csv}", "{csv}", "--out", "{tmp}/m.json"], ["is given twice"]),
+        (
+            ["identify", "{csv}", "--out", "{tmp}/m.json", "--lambda", "0.01", "--prewhiten"],
+            ["--prewhiten works with the automatic selection"],
+        ),
         (["simulate", "--out", "{tmp}/c.csv", "--dt", "5", "--duration", "1"], ["under 2 rows"]),
         (["compare", "--model", "{file}", "--out", "{tmp}/c", "--seed", "-1"], ["--seed must be"]),
         (["flights", "--out", "{tmp}/f", "--noise", "1e300"], ["--noise at most 1"]),

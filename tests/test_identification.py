@@ -122,6 +122,38 @@ def test_compiled_features_keep_the_batch_shape_and_windows_are_weighted_means()
     np.testing.assert_allclose(fit_module._window_mean(rows.copy(), h, w), loop, rtol=1e-12)
 
 
+def test_prewhitened_rows_are_the_plain_rows_quasi_differenced_across_chunks(monkeypatch):
+    """meta["ar1"] = rho: row r becomes row r - rho row r-1 and the first row sqrt(1 - rho^2)
+    times itself (Prais-Winsten), the same in chunks of 500 rows as in one; rows that touch a
+    step without observed states go, as their plain rows do."""
+    import dataclasses
+
+    import identification.fit as fit_module
+
+    rng = np.random.default_rng(6)
+    names = planar_library()
+    missing = np.zeros(1300, bool)
+    missing[700] = True
+    log = Trajectory(np.arange(1300) * 0.01, 0.3 * rng.standard_normal((1300, 6)),
+                     rng.standard_normal((1300, 2)), PS, PI, missing=missing)  # fmt: skip
+    xi = 0.01 * rng.standard_normal((len(PS), len(names)))
+    rho = 0.9
+    white = dataclasses.replace(log, meta={fit_module.AR1: rho})
+    theta, y = fit_module.regression_rows([log.slice(0, 700)], names, "rk4", 1, xi)
+    expect = np.vstack([np.sqrt(1 - rho**2) * theta[:1], theta[1:] - rho * theta[:-1]])
+    monkeypatch.setattr(fit_module, "CHUNK_ELEMENTS", 1)  # chunks of 500 rows
+    chunked, y_chunked = fit_module.regression_rows([white], names, "rk4", 1, xi)
+    plain, _ = fit_module.regression_rows([log], names, "rk4", 1, xi)
+    assert len(plain) == 1299 - 2 and len(chunked) == len(plain) - 1  # one more pair lost
+    np.testing.assert_allclose(chunked[:699], expect, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(y_chunked[:699],
+                               np.vstack([np.sqrt(1 - rho**2) * y[:1], y[1:] - rho * y[:-1]]),
+                               rtol=1e-12, atol=1e-12)  # fmt: skip
+    monkeypatch.setattr(fit_module, "CHUNK_ELEMENTS", 10**9)
+    whole, _ = fit_module.regression_rows([white], names, "rk4", 1, xi)
+    np.testing.assert_allclose(whole, chunked, rtol=1e-12, atol=1e-12)
+
+
 def test_a_chunk_of_rows_holds_about_two_chunk_sized_arrays_at_its_peak(monkeypatch):
     """Memory of the streamed fit: building one chunk's RK4 rows of the 6-DOF library (four
     stages, the window means) and factoring them peaks near two arrays of the chunk's size,

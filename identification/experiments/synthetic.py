@@ -323,6 +323,60 @@ def add_noise(trajs: Sequence[Trajectory], sigma: float, seed: int = 7) -> list[
     ]
 
 
+GUST_TAU = 0.4
+"""Correlation time of :func:`gusty_planar_flights`' gusts [s]."""
+
+
+def gusty_planar_flights(
+    params: PlanarQuadParams, gust: float, seed: int, flights: int = 3, steps: int = 1200,
+    dt: float = 0.01,
+) -> list[Trajectory]:  # fmt: skip
+    """Planar PD flights in unmeasured gusts: data from a simulator of its own, not the envs'.
+
+    Ornstein-Uhlenbeck forces of standard deviation ``gust`` m g on y and z and a moment of
+    ``gust`` m g times 2 cm, correlation :data:`GUST_TAU`, act on the planar equations,
+    integrated by classical RK4 in five substeps per sample (the gusts drawn per substep).
+    A PD of its own flies six random waypoints per flight with a tilt limit of 0.3 rad and an
+    AR(1) dither on both inputs (5 % of m g, and 15 Ixx); the applied inputs are logged,
+    held over each step, the gusts are not. The controller answers the gusts, so the inputs
+    correlate with the equation errors: the closed-loop case of unmeasured forces.
+    """
+    rng = np.random.default_rng(seed)
+    m, ixx, g = params.mass, params.Ixx, 9.81
+    out = []
+    for _ in range(flights):
+        x, force, dither = np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(2)
+        goals = rng.uniform([-1.5, 0.5], [1.5, 2.5], size=(6, 2))
+        states, inputs = np.empty((steps, 6)), np.empty((steps, 2))
+        for k in range(steps):
+            y, z, phi, vy, vz, w = x
+            goal = goals[k * 6 // steps]
+            ay, az = 3 * (goal[0] - y) - 2.5 * vy, 4 * (goal[1] - z) - 3 * vz
+            tilt = np.clip(-ay / g, -0.3, 0.3)
+            dither = 0.9 * dither + 0.44 * rng.normal(size=2) * [0.05 * m * g, 15 * ixx]
+            u = dither + [m * (g + az) / np.cos(phi), ixx * (250 * (tilt - phi) - 30 * w)]
+            states[k], inputs[k] = x, u
+            h = dt / 5
+            for _ in range(5):
+                a = np.exp(-h / GUST_TAU)
+                kick = gust * m * g * rng.normal(size=3) * [1.0, 1.0, 0.02]
+                force = a * force + np.sqrt(1 - a * a) * kick
+
+                def f(s: np.ndarray, d: np.ndarray = force, u: np.ndarray = u) -> np.ndarray:
+                    return np.array([s[3], s[4], s[5], (d[0] - u[0] * np.sin(s[2])) / m,
+                                     (u[0] * np.cos(s[2]) - m * g + d[1]) / m,
+                                     (u[1] + d[2]) / ixx])  # fmt: skip
+
+                k1 = f(x)
+                k2 = f(x + h / 2 * k1)
+                k3 = f(x + h / 2 * k2)
+                x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + f(x + h * k3))
+        t = np.arange(steps) * dt
+        meta = {"gust": gust}
+        out.append(Trajectory(t, states, inputs, PLANAR_STATE_NAMES, PLANAR_INPUT_NAMES, meta=meta))
+    return out
+
+
 def truth_planar(params: PlanarQuadParams = OTHER_PLANAR, drag: float = 0.0) -> dict:
     """True planar model {state: {feature: coefficient}}, with the drag terms when drag > 0."""
     m = params.mass
