@@ -826,8 +826,11 @@ def state_bias_note(
     return None
 
 
-KINEMATIC_INPUT_SHARE = 3e-3
-"""An input's share of a kinematic relation's rhs (standard deviations) that is named."""
+KINEMATIC_INPUT_SHARE, KINEMATIC_INPUT_MAX = 3e-3, 0.5
+"""An input's share of a kinematic relation's rhs (standard deviations) that is named; from
+``KINEMATIC_INPUT_MAX`` on the inputs carry the equation, which is then a dynamic one that
+holds a term of a kinematic form (a trial's `w' = ... + 0.987 cos(psi) sin(theta) u`, a
+spurious term beside the thrust, 68.7 % of the rhs, was named as a logging fault)."""
 
 
 def kinematic_input_note(
@@ -866,7 +869,7 @@ def kinematic_input_note(
         mine = np.isin(cols, driven)
         whole = float(np.std(theta @ xi[i, cols]))
         share = float(np.std(theta[:, mine] @ xi[i, cols[mine]])) / max(whole, 1e-300)
-        if share > KINEMATIC_INPUT_SHARE:
+        if KINEMATIC_INPUT_SHARE < share < KINEMATIC_INPUT_MAX:
             terms_text = ", ".join(names[j] for j in driven)
             where.append(f"{state}' ({terms_text}: {share:.1%} of its rhs)")
     if not where:

@@ -521,6 +521,28 @@ def test_inputs_that_changed_within_the_logged_step_are_named():
     assert not any("kinematic relation" in w for w in report.warnings), report.warnings
 
 
+def test_a_dynamic_equation_holding_a_term_of_kinematic_form_is_not_named(other_clean):
+    """A trial's sagging 6-DOF flights got a spurious `0.987 cos(psi) sin(theta) u` beside the
+    thrust in w' and a note that w' was a kinematic relation holding an input. Where the
+    inputs carry most of the equation it is a dynamic one: no note; a kinematic relation
+    with a small input term still gets it."""
+    from identification.diagnostics import kinematic_input_note
+    from identification.experiments.truth import truth_matrix
+
+    names = planar_library()
+    exact = truth_matrix(truth_planar(OTHER_PLANAR), PS, names)
+    assert kinematic_input_note(other_clean, names, exact) is None
+    dynamic = exact.copy()
+    dynamic[PS.index("y_dot"), names.index("cos(phi) z_dot")] = 1.0  # of kinematic form
+    assert kinematic_input_note(other_clean, names, dynamic) is None
+    stray = exact.copy()
+    x, u = np.concatenate([t.x for t in other_clean]), np.concatenate([t.u for t in other_clean])
+    size = 0.05 * x[:, PS.index("phi_dot")].std() / u[:, PI.index("u2")].std()
+    stray[PS.index("phi"), names.index("u2")] = size  # 5 % of phi' = phi_dot
+    note = kinematic_input_note(other_clean, names, stray)
+    assert note is not None and "phi' (u2: " in note
+
+
 def test_quantised_logs_are_not_named_as_outlying_steps(other_clean):
     """States logged on a grid (1 cm, 0.01 rad and their rates, as an encoder or a mocap
     gives): the residuals take a few levels and their median departure is near zero, so a
