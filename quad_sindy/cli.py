@@ -590,7 +590,7 @@ def identify(
     from identification.fit import FitConfig, fit
     from identification.libraries import library_from_spec, spec_angles
     from identification.scoring import long_enough, typical_length
-    from identification.selection import WINDOWS, select_model
+    from identification.selection import WINDOWS, select_model, term_note_count
     from identification.support import long_run_ratio
     from quad_envs.fileio import atomic_write_bytes
 
@@ -758,7 +758,11 @@ def identify(
                     f"state's scale; {report.folds} folds)"
                     + _after_checks(best.n_terms, model.n_terms)
                 )
-                for note in report.warnings:
+                terms = term_note_count(report.warnings, model.state_names)
+                for k, note in enumerate(report.warnings):
+                    if terms and k == len(report.warnings) - terms:
+                        typer.echo(f"({terms} notes on single equations' terms follow: near "
+                                   "twins, terms dropped or kept)")  # fmt: skip
                     typer.echo(f"warning: {note}")
                 # rendered now, written with the model (an interrupt left a new plot beside
                 # the old model)

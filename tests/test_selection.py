@@ -1263,3 +1263,20 @@ def test_score_predicts_held_out_flights_against_an_analytic_reference(tmp_path,
     flagged = CliRunner().invoke(app, ["score", str(tmp_path / "off.json"), path,
                                        "--seconds", "1000"])  # fmt: skip
     assert "milliseconds" in flagged.output, flagged.output
+
+
+def test_notes_on_the_data_and_the_fit_come_before_those_on_single_terms():
+    """A trial's disturbed 6-DOF runs printed 32 to 43 notes, the two that questioned the
+    model (misfit, logs disagree) last among near-twin notes on single terms."""
+    from identification.selection import _fit_notes_first, term_note_count
+
+    notes = [
+        "y': kept 'y_dot'; its nearly collinear twin",
+        "the logs disagree: refitted",
+        "z_dot': dropped 'z'",
+        "weak terms, kept because",
+        "the residual of y' (0.1",
+    ]
+    ordered = _fit_notes_first(notes, PS)
+    assert ordered == [notes[1], notes[3], notes[4], notes[0], notes[2]]
+    assert term_note_count(ordered, PS) == 2
