@@ -773,6 +773,64 @@ def _kinematic(term: tuple, coef: float, moving: set[str], angles: set[str]) -> 
     )
 
 
+POSITION_SHARE = 0.01
+"""Position terms are named where they carry at least this share of their equation's rhs on
+the data (standard deviations): a noise term of no weight is left to the term notes."""
+
+
+def position_terms_note(
+    trajs: Sequence[Trajectory], names: Sequence[str], xi: np.ndarray
+) -> str | None:
+    """A note where a vehicle's driven equations hold its position.
+
+    A free-flying vehicle's accelerations do not depend on where it is. Terms in a position
+    (a state whose own equation is a kinematic relation, as ``z' = z_dot``; angles are
+    left out) in an equation that holds an input stand for a force field (ground effect, a
+    tether) or for unmeasured forces that the controller answers around its set points: a
+    trial's gusts gave ``y_dot' = -16.72 y + 16.72 cos(phi) y + ...`` and ground effect
+    ``z_dot' = -9.22 - 0.91 z + ...``, with no word on what they meant. For vehicles only
+    (a pendulum's or a spring's position terms are its physics).
+    """
+    state_names, input_names = trajs[0].state_names, trajs[0].input_names
+    angles = trig_variables(names)
+    moving = set(state_names) - angles
+    terms = [parse_term(n) for n in names]
+    positions = {
+        state for i, state in enumerate(state_names) if state in moving
+        and any(_kinematic(terms[j], xi[i, j], moving, angles) for j in np.flatnonzero(xi[i]))
+    }  # fmt: skip
+    found = []
+    for i, state in enumerate(state_names):
+        cols = np.flatnonzero(xi[i])
+        if state in positions or not any(
+            f.var in input_names for j in cols for f in terms[j]
+        ):  # a kinematic relation, or no input: not a driven equation
+            continue
+        placed = [j for j in cols if any(f.var in positions and f.kind == "pow" for f in terms[j])]
+        if not placed:
+            continue
+        x, u = np.concatenate([t.x for t in trajs]), np.concatenate([t.u for t in trajs])
+        with np.errstate(all="ignore"):  # this equation's terms only
+            theta = compile_features([names[j] for j in cols], state_names, input_names)(x, u)
+        mine = np.isin(cols, placed)
+        share = float(np.std(theta[:, mine] @ xi[i, cols[mine]])) / max(
+            float(np.std(theta @ xi[i, cols])), 1e-300
+        )
+        if share >= POSITION_SHARE:
+            held = [f"{xi[i, j]:.4g} {names[j]}" for j in placed]
+            found.append(f"{state}' ({', '.join(held[:3])}{', ...' if len(held) > 3 else ''}: "
+                         f"{share:.0%} of its rhs)")  # fmt: skip
+    if not found:
+        return None
+    return (
+        f"the vehicle's equations of motion hold its position: {'; '.join(found)}. A "
+        "free-flying vehicle's accelerations do not depend on where it is, so these stand for "
+        "a force field (ground effect near the floor, a tether, a wall) or for unmeasured "
+        "forces its controller answers around its set points (wind, gusts); the model will "
+        "not hold elsewhere: fly away from such effects, or log them"
+    )
+
+
 def state_bias_note(
     xi: np.ndarray, names: Sequence[str], state_names: Sequence[str], spread: np.ndarray
 ) -> str | None:

@@ -98,6 +98,7 @@ from identification.diagnostics import (
     misfit_note,
     outlier_note,
     outlying_steps,
+    position_terms_note,
     stamp_jitter,
     state_bias_note,
     state_shift_note,
@@ -115,7 +116,7 @@ from identification.fit import (
     solve,
     solve_lambdas,
 )
-from identification.libraries import library_from_spec
+from identification.libraries import PRESETS, library_from_spec
 from identification.model import IdentifiedModel
 from identification.scoring import (
     integrator_resolution,
@@ -438,6 +439,13 @@ def select_model(
     return _warned(model, report)
 
 
+def _is_vehicle(system: str | None) -> bool:
+    """Whether the model's label names a vehicle (a preset or an env's vehicle)."""
+    from quad_envs.vehicles import VEHICLES
+
+    return system is not None and (system in PRESETS or system in VEHICLES)
+
+
 def _fit_notes_first(notes: list[str], states: Sequence[str]) -> list[str]:
     """The notes on the data and the whole fit before those on single equations' terms.
 
@@ -730,6 +738,9 @@ def _select_model(
     biased = state_bias_note(xi, names, first.state_names, spread)
     if biased:
         report.warnings.append(biased)
+    placed = position_terms_note(used, names, xi) if _is_vehicle(system) else None
+    if placed:
+        report.warnings.append(placed)
     if base.derivative in ("rk4", "forward"):
         # The returned model's own residuals: sparse, it cannot bend to bad steps as a fit of
         # the whole library does (4 % of the steps with a wrong input hid from such a fit).

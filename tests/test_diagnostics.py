@@ -543,6 +543,24 @@ def test_a_dynamic_equation_holding_a_term_of_kinematic_form_is_not_named(other_
     assert note is not None and "phi' (u2: " in note
 
 
+def test_position_terms_in_a_vehicles_driven_equations_are_named_by_their_weight(other_clean):
+    """A trial's gusts gave `y_dot' = -16.72 y + 16.72 cos(phi) y + ...` and ground effect
+    `z_dot' = ... - 0.91 z`, with no word on what a position term means for a vehicle. They
+    are named where they carry 1 % of the equation or more; the kinematic relations and
+    a term of no weight are not."""
+    from identification.diagnostics import position_terms_note
+    from identification.experiments.truth import truth_matrix
+
+    names = planar_library()
+    exact = truth_matrix(truth_planar(OTHER_PLANAR), PS, names)
+    assert position_terms_note(other_clean, names, exact) is None
+    placed = exact.copy()
+    placed[PS.index("z_dot"), names.index("z")] = -0.9
+    placed[PS.index("y_dot"), names.index("z")] = 1e-7  # no weight
+    note = position_terms_note(other_clean, names, placed)
+    assert note is not None and "z_dot' (-0.9 z: " in note and "y_dot'" not in note, note
+
+
 def test_quantised_logs_are_not_named_as_outlying_steps(other_clean):
     """States logged on a grid (1 cm, 0.01 rad and their rates, as an encoder or a mocap
     gives): the residuals take a few levels and their median departure is near zero, so a
