@@ -800,6 +800,7 @@ def position_terms_note(
         and any(_kinematic(terms[j], xi[i, j], moving, angles) for j in np.flatnonzero(xi[i]))
     }  # fmt: skip
     found = []
+    x = u = None  # the data, read once where needed
     for i, state in enumerate(state_names):
         cols = np.flatnonzero(xi[i])
         if state in positions or not any(
@@ -809,7 +810,8 @@ def position_terms_note(
         placed = [j for j in cols if any(f.var in positions and f.kind == "pow" for f in terms[j])]
         if not placed:
             continue
-        x, u = np.concatenate([t.x for t in trajs]), np.concatenate([t.u for t in trajs])
+        if x is None:
+            x, u = np.concatenate([t.x for t in trajs]), np.concatenate([t.u for t in trajs])
         with np.errstate(all="ignore"):  # this equation's terms only
             theta = compile_features([names[j] for j in cols], state_names, input_names)(x, u)
         mine = np.isin(cols, placed)
