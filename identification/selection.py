@@ -419,6 +419,12 @@ def select_model(
     model, report = _select_model(trajs, library, **settings)
     rho = report.error_ar1
     if prewhiten is False or rho is None or rho <= (0.0 if prewhiten else AR1_MIN):
+        if prewhiten:  # asked for, and nothing to prewhiten
+            why = "at round-off" if rho is None else f"lag-1 autocorrelation {rho:.2f}"
+            report.warnings.append(
+                f"prewhitening was asked for, but the equation errors are not correlated in "
+                f"time ({why}): the plain fit is kept"
+            )
         report.warnings = _fit_notes_first(report.warnings, model.state_names)
         model.meta["selection"] = report.to_meta()
         return _warned(model, report)

@@ -594,6 +594,10 @@ def test_noisy_data_of_another_vehicle_give_the_exact_model_within_one_percent()
     assert check.max_rel_error < 1e-2
     # white measurement noise: a difference of two noisy samples, not prewhitened
     assert report.error_ar1 < -0.3 and report.ar1 == 0.0
+    asked = select_model(add_noise(clean, 1e-3), planar_library(), n_models=0, prewhiten=True)
+    assert asked[1].ar1 == 0.0 and "asked for, but the equation errors are not" in str(
+        asked[1].warnings
+    )
 
 
 def test_gusts_a_controller_answers_are_prewhitened_and_the_plain_fit_is_not_kept():
