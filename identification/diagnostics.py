@@ -287,6 +287,9 @@ def disagreement_note(
     halves of each of a trial's three logs, and no note had said so.
     """
     found = _disagreeing(trajs, names, window, xi)
+    halves = [part for tr in trajs for part in (tr.slice(0, len(tr) // 2),
+                                                tr.slice(len(tr) // 2, len(tr)))]  # fmt: skip
+    drift = _disagreeing(long_enough(halves, 4 * window), names, window, xi, gains=True)
     if found:
         count, i, j, low, high, more = found
         return (
@@ -295,19 +298,19 @@ def disagreement_note(
             f"from {low:.4g} to {high:.4g}){_others(more)}: the library lacks a term that "
             "varies between the logs, or logs of different vehicles (payloads, batteries) "
             "were pooled, which no one model fits (identify each vehicle's logs on its own)"
-        )
-    halves = [part for tr in trajs for part in (tr.slice(0, len(tr) // 2),
-                                                tr.slice(len(tr) // 2, len(tr)))]  # fmt: skip
-    found = _disagreeing(long_enough(halves, 4 * window), names, window, xi)
-    if not found:
+            + ("; the halves of the logs disagree too, so a parameter may drift within the "
+               "flights (a battery that sags)" if drift else "")
+        )  # fmt: skip
+    if not drift:
         return None
-    count, i, j, low, high, more = found
+    count, i, j, low, high, more = drift
     return (
         f"the halves of the logs disagree: refitted on each of {count} half-logs alone, "
         f"{trajs[0].state_names[i]}' differs beyond what their noise allows ('{names[j]}' "
         f"from {low:.4g} to {high:.4g}){_others(more)}: a parameter drifts within the flights "
-        "(a battery that sags, fuel or a payload that changes), or the library lacks a term "
-        "that changes along them; no one model fits both halves"
+        "(a battery that sags, fuel or a payload that changes), the inputs did not act as "
+        "logged, or the library lacks a term that changes along them; no one model fits both "
+        "halves"
     )
 
 
@@ -316,9 +319,18 @@ def _others(more: int) -> str:
 
 
 def _disagreeing(
-    trajs: Sequence[Trajectory], names: Sequence[str], window: int, xi: np.ndarray
+    trajs: Sequence[Trajectory],
+    names: Sequence[str],
+    window: int,
+    xi: np.ndarray,
+    gains: bool = False,
 ) -> tuple | None:
     """The segments' disagreement of :func:`disagreement_note`, or None.
+
+    ``gains``: an equation counts only where the term that moves it most holds an input. A
+    vehicle's drifting parameters (a battery, a payload) are input gains; a constant that
+    moves between the halves of a log is a slow force (gusts: a trial's `'1' from -10.02 to
+    -9.559`) or a misfit, and was named as drift.
 
     Returns:
         (segments compared, state, term, lowest and highest refit of the term, other
@@ -361,6 +373,9 @@ def _disagreeing(
         if chi > bar and lost > DISAGREE_SHARE * targets:
             rms = np.sqrt(np.mean([np.diag(f[i][2]) / f[i][4] for f in fits], axis=0))
             k = int(np.argmax((est.max(axis=0) - est.min(axis=0)) * rms))
+            inputs = set(trajs[0].input_names)
+            if gains and not any(f.var in inputs for f in parse_term(names[support[k]])):
+                continue
             found.append((chi / bar, i, support[k], est[:, k].min(), est[:, k].max()))
     if not found:
         return None

@@ -492,19 +492,26 @@ def _prewhiten(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rows r - rho (r - 1) of a chunk that holds one row before its own.
 
-    With ``starts`` the chunk begins the trajectory: its first row is scaled by
-    sqrt(1 - rho^2) instead.
+    With ``starts`` the chunk begins the trajectory. A row without an observed row before
+    it (the trajectory's first, or the first after rows a logger lost) starts the AR(1)
+    chain anew: it is scaled by sqrt(1 - rho^2). Every row the plain rows keep is kept, so
+    the prewhitened rows and the steps stay in step (the outlier notes map one to the
+    other; a trial's log with re-sent rows failed there).
     """
     if starts:
-        head = np.sqrt(1.0 - rho * rho)
-        out = np.empty_like(rows, order="F")
-        out[0] = head * rows[0]
-        np.subtract(rows[1:], rho * rows[:-1], out=out[1:])
-        pairs = np.concatenate([keep[:1], keep[1:] & keep[:-1]])
-        return out, np.concatenate([head * y[:1], y[1:] - rho * y[:-1]]), pairs
-    out = np.empty((rows.shape[0] - 1, rows.shape[1]), order="F")
-    np.subtract(rows[1:], rho * rows[:-1], out=out)
-    return out, y[1:] - rho * y[:-1], keep[1:] & keep[:-1]
+        own, own_y, own_keep = rows, y, keep
+        prev = np.concatenate([rows[:1], rows[:-1]])
+        prev_y = np.concatenate([y[:1], y[:-1]])
+        chained = np.concatenate([[False], keep[:-1]])
+    else:
+        own, own_y, own_keep = rows[1:], y[1:], keep[1:]
+        prev, prev_y, chained = rows[:-1], y[:-1], keep[:-1]
+    scale = np.where(chained, 1.0, np.sqrt(1.0 - rho * rho))[:, None]
+    lag = np.where(chained, rho, 0.0)[:, None]
+    out = np.empty(own.shape, order="F")
+    np.multiply(own, scale, out=out)
+    out -= lag * prev
+    return out, own_y * scale - lag * prev_y, own_keep
 
 
 def regression_rows(

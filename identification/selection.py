@@ -410,14 +410,17 @@ def select_model(
             every candidate with terms diverged, or the chosen model has no term (nothing
             predicts the held-out data better than holding the state).
     """
-    if prewhiten not in (None, True, False):
+    if prewhiten is not None and not isinstance(prewhiten, bool | np.bool_):
         raise TypeError(f"prewhiten must be None, True or False, got {prewhiten!r}")
+    prewhiten = None if prewhiten is None else bool(prewhiten)  # (0 == False read as None)
     trajs = as_trajectories(trajs)  # (read once: an iterator is selected from twice)
     settings = dict(config=config, lambdas=lambdas, windows=windows, folds=folds,
                     horizon=horizon, n_models=n_models, seed=seed, system=system,
                     progress=progress, drop_outliers=drop_outliers)  # fmt: skip
     model, report = _select_model(trajs, library, **settings)
     rho = report.error_ar1
+    if prewhiten is False and rho is not None and rho > AR1_MIN:
+        report.warnings.append(_ar1_note(rho, report, None, None))
     if prewhiten is False or rho is None or rho <= (0.0 if prewhiten else AR1_MIN):
         if prewhiten:  # asked for, and nothing to prewhiten
             why = "at round-off" if rho is None else f"lag-1 autocorrelation {rho:.2f}"
@@ -488,6 +491,11 @@ def _ar1_note(rho: float, plain: SelectionReport, white_terms: int | None, kept:
         "lacks (a sagging battery, ground effect); "
     )
     plain_terms = plain.final_terms
+    if kept is None and white_terms is None:
+        return seen + (
+            "prewhitening was not tried (prewhiten=False / --no-prewhiten, or a window "
+            "other than 1 asked for); it may remove such a bias"
+        )
     if kept is None:
         return seen + (
             f"the rows were prewhitened (AR(1), Prais-Winsten, window 1), which needs "

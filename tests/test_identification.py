@@ -125,7 +125,9 @@ def test_compiled_features_keep_the_batch_shape_and_windows_are_weighted_means()
 def test_prewhitened_rows_are_the_plain_rows_quasi_differenced_across_chunks(monkeypatch):
     """meta["ar1"] = rho: row r becomes row r - rho row r-1 and the first row sqrt(1 - rho^2)
     times itself (Prais-Winsten), the same in chunks of 500 rows as in one; rows that touch a
-    step without observed states go, as their plain rows do."""
+    step without observed states go, as their plain rows do, and the row after them starts
+    the chain anew, so the rows stay in step with the plain ones (a trial's log with re-sent
+    rows failed where a note maps rows to steps)."""
     import dataclasses
 
     import identification.fit as fit_module
@@ -144,8 +146,11 @@ def test_prewhitened_rows_are_the_plain_rows_quasi_differenced_across_chunks(mon
     monkeypatch.setattr(fit_module, "CHUNK_ELEMENTS", 1)  # chunks of 500 rows
     chunked, y_chunked = fit_module.regression_rows([white], names, "rk4", 1, xi)
     plain, _ = fit_module.regression_rows([log], names, "rk4", 1, xi)
-    assert len(plain) == 1299 - 2 and len(chunked) == len(plain) - 1  # one more pair lost
+    assert len(plain) == 1299 - 2 and len(chunked) == len(plain)
     np.testing.assert_allclose(chunked[:699], expect, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(chunked[699], np.sqrt(1 - rho**2) * plain[699], rtol=1e-12)
+    np.testing.assert_allclose(chunked[700:], plain[700:] - rho * plain[699:-1], rtol=1e-12,
+                               atol=1e-12)  # fmt: skip
     np.testing.assert_allclose(y_chunked[:699],
                                np.vstack([np.sqrt(1 - rho**2) * y[:1], y[1:] - rho * y[:-1]]),
                                rtol=1e-12, atol=1e-12)  # fmt: skip

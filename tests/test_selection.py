@@ -618,9 +618,30 @@ def test_gusts_a_controller_answers_are_prewhitened_and_the_plain_fit_is_not_kep
     assert report.ar1 > 0.8 and report.best.window == 1
     assert worst(model) < 0.01, model.equations()  # the exact 7 terms
     assert model.meta["selection"]["prewhitened_ar1"] == report.ar1
-    plain, plain_report = select_model(data, planar_library(), n_models=0, prewhiten=False)
+    assert not any("halves of the logs" in w for w in report.warnings)  # gusts are no drift
+    plain, plain_report = select_model(data, planar_library(), n_models=0,
+                                       prewhiten=np.False_)  # fmt: skip
     assert plain_report.ar1 == 0.0 and worst(plain) > 0.03  # what the default is spared
     assert check_support(plain, truth_planar(vehicle)).exact_support  # the same terms, biased
+    assert any("prewhitening was not tried" in w for w in plain_report.warnings)
+    with pytest.raises(TypeError, match="prewhiten must be None, True or False"):
+        select_model(data, planar_library(), prewhiten=0)
+
+
+def test_a_gusty_log_with_re_sent_rows_is_prewhitened_without_failing(tmp_path):
+    """A recheck trial's gusty log with 26 re-sent state rows failed (IndexError) where the
+    outlier note maps rows to steps: the prewhitened rows had lost the rows after each
+    bridged one. Each such row now starts the AR(1) chain anew, and the rows stay in step."""
+    vehicle = PlanarQuadParams(mass=0.45, Ixx=3e-3, arm_length=0.12, rotor_force_max=9.0)
+    flight = gusty_planar_flights(vehicle, 0.04, seed=12, flights=1, steps=1000)[0]
+    x = flight.x.copy()
+    for k in np.random.default_rng(1).choice(np.arange(10, 990), 26, replace=False):
+        x[k] = x[k - 1]  # the logger re-sent the row before
+    path = write_trajectory_csv(tmp_path / "gusty.csv", Trajectory(flight.t, x, flight.u, PS, PI))
+    trajs, _ = load_data([path], system="planar")
+    assert any(t.missing is not None for t in trajs)  # bridged rows
+    _, report = select_model(trajs, planar_library(), n_models=0)
+    assert report.ar1 > 0.8
 
 
 def test_noisy_solve_ivp_data_of_the_heavy_vehicle_keep_the_support():
