@@ -412,7 +412,7 @@ def select_model(
     """
     if prewhiten is not None and not isinstance(prewhiten, bool | np.bool_):
         raise TypeError(f"prewhiten must be None, True or False, got {prewhiten!r}")
-    prewhiten = None if prewhiten is None else bool(prewhiten)  # (0 == False read as None)
+    prewhiten = None if prewhiten is None else bool(prewhiten)  # np.False_ is not False
     trajs = as_trajectories(trajs)  # (read once: an iterator is selected from twice)
     settings = dict(config=config, lambdas=lambdas, windows=windows, folds=folds,
                     horizon=horizon, n_models=n_models, seed=seed, system=system,
@@ -428,9 +428,7 @@ def select_model(
                 f"prewhitening was asked for, but the equation errors are not correlated in "
                 f"time ({why}): the plain fit is kept"
             )
-        report.warnings = _fit_notes_first(report.warnings, model.state_names)
-        model.meta["selection"] = report.to_meta()
-        return _warned(model, report)
+        return _finished(model, report)
     ar1 = min(rho, AR1_MAX)
     try:
         white, white_report = _select_model(trajs, library, **settings, _ar1=ar1)
@@ -443,6 +441,13 @@ def select_model(
             model, report = white, white_report
         else:
             report.warnings.append(_ar1_note(rho, report, white.n_terms, "kept"))
+    return _finished(model, report)
+
+
+def _finished(
+    model: IdentifiedModel, report: SelectionReport
+) -> tuple[IdentifiedModel, SelectionReport]:
+    """The notes in their order, in the model's metadata, and issued."""
     report.warnings = _fit_notes_first(report.warnings, model.state_names)
     model.meta["selection"] = report.to_meta()
     return _warned(model, report)
@@ -813,7 +818,7 @@ def _warned(
     API users see them without reading ``report.warnings``; the CLI prints the list instead.
     """
     for note in report.warnings:
-        warnings.warn(note, IdentificationWarning, stacklevel=4)  # past serial_blas
+        warnings.warn(note, IdentificationWarning, stacklevel=5)  # past _finished and serial_blas
     return model, report
 
 
