@@ -484,7 +484,8 @@ from 17 fewer terms to 2 more (a small spurious term) and its coefficients were 
 truth; with effects the library lacks it needed 5 to 16 more on the cases where it
 predicted held-out flights worse (a sagging battery, ground effect, unlogged actuator lag),
 and -7 to +1 where it predicted as well or better (docs/identification.md, "Unmeasured
-forces and drifting parameters")."""
+forces and drifting parameters"). A recheck trial's slow strong gusts (6 % m g, 1 s) needed
+3 more and its 6-DOF gust set 16 more, so their biased plain fits were kept (misses)."""
 
 
 def _ar1_note(rho: float, plain: SelectionReport, white_terms: int | None, kept: str | None) -> str:
