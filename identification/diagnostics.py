@@ -247,7 +247,9 @@ def misfit_note(
         "integral window as measurement noise does: the library may lack a term, the "
         "variables may follow another convention (Z-Y-X angles, world-frame velocities), "
         + ("the outlying steps named above may cause it, " if outliers else "")
-        + "or the states' noise is correlated in time (filtered estimates)"
+        + "unmeasured forces may act (wind, gusts: a controller's answer to them biases the "
+        "fit, and beside measurement noise their correlation in time is not seen), "
+        "or the states' noise is correlated in time (filtered estimates)"
     )
 
 
