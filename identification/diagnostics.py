@@ -829,12 +829,7 @@ def position_terms_note(
             continue
         if x is None:
             x, u = np.concatenate([t.x for t in trajs]), np.concatenate([t.u for t in trajs])
-        with np.errstate(all="ignore"):  # this equation's terms only
-            theta = compile_features([names[j] for j in cols], state_names, input_names)(x, u)
-        mine = np.isin(cols, placed)
-        share = float(np.std(theta[:, mine] @ xi[i, cols[mine]])) / max(
-            float(np.std(theta @ xi[i, cols])), 1e-300
-        )
+        share = _rhs_share(names, xi[i], placed, trajs[0], x, u)
         if share >= POSITION_SHARE:
             held = [f"{xi[i, j]:.4g} {names[j]}" for j in placed]
             found.append(f"{state}' ({', '.join(held[:3])}{', ...' if len(held) > 3 else ''}: "
@@ -903,6 +898,23 @@ def state_bias_note(
     return None
 
 
+def _rhs_share(
+    names: Sequence[str], row: np.ndarray, part: list[int], like: Trajectory, x: np.ndarray,
+    u: np.ndarray,
+) -> float:  # fmt: skip
+    """The share of one equation's rhs that its terms ``part`` carry (standard deviations).
+
+    ``row`` is the equation's coefficients, x and u the data; only the equation's own terms
+    are evaluated (memory of a few columns).
+    """
+    cols = np.flatnonzero(row)
+    with np.errstate(all="ignore"):
+        theta = compile_features([names[j] for j in cols], like.state_names, like.input_names)(x, u)
+    mine = np.isin(cols, part)
+    whole = float(np.std(theta @ row[cols]))
+    return float(np.std(theta[:, mine] @ row[cols[mine]])) / max(whole, 1e-300)
+
+
 KINEMATIC_INPUT_SHARE, KINEMATIC_INPUT_MAX = 3e-3, 0.5
 """An input's share of a kinematic relation's rhs (standard deviations) that is named; from
 ``KINEMATIC_INPUT_MAX`` on the inputs carry the equation, which is then a dynamic one that
@@ -941,11 +953,7 @@ def kinematic_input_note(
         driven = [j for j, t in zip(cols, terms, strict=True) if any(f.var in inputs for f in t)]
         if not (kinematic and driven):
             continue
-        with np.errstate(all="ignore"):  # this equation's terms only: memory of a few columns
-            theta = compile_features([names[j] for j in cols], states, inputs)(x, u)
-        mine = np.isin(cols, driven)
-        whole = float(np.std(theta @ xi[i, cols]))
-        share = float(np.std(theta[:, mine] @ xi[i, cols[mine]])) / max(whole, 1e-300)
+        share = _rhs_share(names, xi[i], driven, trajs[0], x, u)
         if KINEMATIC_INPUT_SHARE < share < KINEMATIC_INPUT_MAX:
             terms_text = ", ".join(names[j] for j in driven)
             where.append(f"{state}' ({terms_text}: {share:.1%} of its rhs)")

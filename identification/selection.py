@@ -467,13 +467,18 @@ def _fit_notes_first(notes: list[str], states: Sequence[str]) -> list[str]:
     terms (``x': kept ...``), with the two that questioned the model (misfit, logs
     disagree) last.
     """
-    own = tuple(f"{s}': " for s in states)
+    own = _equation_prefixes(states)
     return [n for n in notes if not n.startswith(own)] + [n for n in notes if n.startswith(own)]
 
 
 def term_note_count(notes: Sequence[str], states: Sequence[str]) -> int:
     """How many notes are on single equations' terms (they come after the others)."""
-    return sum(n.startswith(tuple(f"{s}': " for s in states)) for n in notes)
+    return sum(n.startswith(_equation_prefixes(states)) for n in notes)
+
+
+def _equation_prefixes(states: Sequence[str]) -> tuple[str, ...]:
+    """How a note on one equation's terms begins (``x': ``)."""
+    return tuple(f"{s}': " for s in states)
 
 
 AR1_EXTRA_TERMS = 2
