@@ -15,6 +15,7 @@ ignored (references and commanded inputs written by ``quad-sindy simulate``).
 from __future__ import annotations
 
 import io
+import math
 import re
 import zipfile
 import zlib
@@ -67,6 +68,9 @@ class Trajectory:
             fed to a translational model), not commands held over each step: the RK4 stages
             interpolate them (:meth:`stage_inputs`). Held, a tilt that changes within the
             step left terms of about g dt / 2 in the fit.
+        commands: The logged commands of held inputs that act through a first-order lag
+            (:meth:`lag_inputs`), shape (N, m); ``u`` then holds each step's mean of the
+            lagged inputs. None for inputs that act as logged.
     """
 
     t: np.ndarray
@@ -78,6 +82,7 @@ class Trajectory:
     meta: dict[str, Any] = field(default_factory=dict)
     missing: np.ndarray | None = None
     measured: tuple[str, ...] = ()
+    commands: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.state_names = _names(self.state_names, "state_names")
@@ -108,6 +113,11 @@ class Trajectory:
         unknown = [n for n in self.measured if n not in self.input_names]
         if unknown:
             raise ValueError(f"measured input(s) {unknown} are not inputs {list(self.input_names)}")
+        if self.commands is not None:
+            self.commands = np.asarray(self.commands, dtype=np.float64)
+            if self.commands.shape != self.u.shape:
+                raise ValueError(f"commands have shape {self.commands.shape}, the inputs "
+                                 f"{self.u.shape}")  # fmt: skip
         validate(self)
 
     @property
@@ -140,9 +150,10 @@ class Trajectory:
         """Rows [start, stop) as a new trajectory (same names, meta copied)."""
         refs = None if self.refs is None else self.refs[start:stop]
         missing = None if self.missing is None else self.missing[start:stop]
+        commands = None if self.commands is None else self.commands[start:stop]
         return Trajectory(
             self.t[start:stop], self.x[start:stop], self.u[start:stop], self.state_names,
-            self.input_names, refs, dict(self.meta), missing, self.measured,
+            self.input_names, refs, dict(self.meta), missing, self.measured, commands,
         )  # fmt: skip
 
     def shift_inputs(self, rows: int, margin: int = 0) -> Trajectory:
@@ -158,21 +169,70 @@ class Trajectory:
             raise ValueError(f"a segment of {n} rows is too short to shift its inputs {rows} rows")
         part = self.slice(lo, hi)
         part.u = self.u[lo + rows : hi + rows].copy()
+        if self.commands is not None:
+            part.commands = self.commands[lo + rows : hi + rows].copy()
         part.meta["input_shift"] = int(self.meta.get("input_shift", 0)) + rows
         return part
+
+    def lag_inputs(self, tau: float, settle: bool = True) -> Trajectory:
+        """The trajectory with its held inputs acting through a first-order lag of ``tau`` [s].
+
+        An actuator (a motor and its rotor) follows its command as ``a' = (c - a) / tau``;
+        a log of the commands alone then fits neither the states' response nor any term of
+        the library. Each row's held input becomes the actuators' output at that row
+        (:func:`lagged_inputs`) and the RK4 stages of each step see it move within the step
+        (:meth:`stage_inputs`, exact); the commands are kept in :attr:`commands` (a later
+        call lags them again, it does not lag the lag) and ``tau`` in
+        ``meta["input_lag"]``. The actuators start at the first row's command; the log need
+        not start in steady flight (nor a segment after a gap), so with ``settle`` the rows
+        before :data:`LAG_SETTLE` time constants have passed are left out (a row too few
+        leaves the fit a transient the vehicle never had). Measured inputs are signals and
+        keep their values. ``tau = 0`` gives the commands back.
+
+        Raises:
+            ValueError: ``tau`` negative or not finite, or a segment too short to settle.
+        """
+        tau = float(tau)
+        if not math.isfinite(tau) or tau < 0:
+            raise ValueError(f"an input lag is a time constant >= 0 [s], got {tau!r}")
+        commands = self.u if self.commands is None else self.commands
+        part = self.slice(0, len(self))
+        held = [k for k, n in enumerate(self.input_names) if n not in self.measured]
+        part.u = commands.copy()
+        if tau > 0 and held:
+            part.u[:, held] = lagged_inputs(self.t, commands[:, held], tau)
+        part.commands = commands.copy() if tau > 0 else None
+        if tau > 0:
+            part.meta["input_lag"] = tau
+        else:
+            part.meta.pop("input_lag", None)
+        rows = int(np.searchsorted(self.t, self.t[0] + LAG_SETTLE * tau)) if settle else 0
+        if len(self) - rows < 3:
+            raise ValueError(f"a segment of {len(self)} rows ({self.t[-1] - self.t[0]:g} s) is "
+                             f"too short for its actuators to settle ({LAG_SETTLE:g} time "
+                             f"constants of {tau:g} s)")  # fmt: skip
+        return part.slice(rows, len(self)) if rows else part
 
     def stage_inputs(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The inputs at the start, middle and end of the steps that start at ``rows``.
 
         A held input keeps its row's value over the step (the same array is returned three
         times when every input is held); a :attr:`measured` one follows
-        :func:`stage_inputs`.
+        :func:`stage_inputs`; a lagged one (:meth:`lag_inputs`) follows its actuator
+        (:func:`lag_stages`).
 
         Args:
             rows: Row indices, each below ``len(self) - 1``.
         """
         cols = [self.input_names.index(n) for n in self.measured]
-        return stage_inputs(self.t, self.u, rows, cols)
+        stages = stage_inputs(self.t, self.u, rows, cols)
+        if self.commands is None:
+            return stages
+        held = [k for k in range(len(self.input_names)) if k not in cols]
+        u0, um, u1 = stages[0], stages[1].copy(), stages[2].copy()
+        um[:, held], u1[:, held] = lag_stages(self.t, self.u[:, held], self.commands[:, held],
+                                              float(self.meta["input_lag"]), rows)  # fmt: skip
+        return u0, um, u1
 
     @classmethod
     def from_run(cls, run: Any, inputs: str = "applied", **meta: Any) -> Trajectory:
@@ -185,6 +245,61 @@ class Trajectory:
         owner = getattr(run, "vehicle", None) or run.system
         names = (owner.state_names, owner.input_names)
         return cls(run.t, run.states, u, *names, refs=run.refs, meta=meta)
+
+
+LAG_SETTLE = 7.0
+"""Time constants after which a lagged input's unknown start is forgotten (exp(-7) = 0.09 %
+of the actuators' offset from the first command is left): :meth:`Trajectory.lag_inputs`
+leaves out the rows before."""
+
+
+def input_lag(trajs: Sequence[Trajectory]) -> float:
+    """The first-order lag [s] the trajectories' inputs act through (0: none; one for all)."""
+    lags = sorted({float(t.meta.get("input_lag", 0.0)) for t in trajs})
+    if len(lags) > 1:
+        raise ValueError(f"the trajectories' inputs act through different lags {lags} s: "
+                         "give them all the same (Trajectory.lag_inputs)")  # fmt: skip
+    return lags[0] if lags else 0.0
+
+
+def lagged_inputs(t: np.ndarray, commands: np.ndarray, tau: float) -> np.ndarray:
+    """The output at each row of actuators that follow held commands through a lag ``tau``.
+
+    With ``a' = (c - a) / tau`` and command ``c_k`` held over step k of length ``h_k``,
+    ``a(t_k + s) = c_k + (a_k - c_k) exp(-s / tau)`` (:func:`lag_stages`), so ``a_{k+1} =
+    c_k + (a_k - c_k) alpha_k`` with ``alpha_k = exp(-h_k / tau)``, each row's own step.
+    ``a_0 = c_0``: the actuators start at the first command.
+    """
+    from scipy.signal import lfilter
+
+    c = np.asarray(commands, dtype=np.float64)
+    a = np.empty_like(c)
+    if not len(c):
+        return a
+    a[0] = c[0]
+    steps = np.diff(t)
+    alpha = np.exp(-steps / tau)
+    if steps.size and np.ptp(steps) <= 1e-9 * steps[0]:  # a uniform grid: a linear filter
+        gain = float(alpha[0])
+        a[1:] = lfilter([1.0 - gain], [1.0, -gain], c[:-1], axis=0,
+                        zi=np.full((1, c.shape[1]), gain) * c[0])[0]  # fmt: skip
+    else:  # each row's own step: a recursion one row at a time
+        for k in range(len(c) - 1):
+            a[k + 1] = c[k] + alpha[k] * (a[k] - c[k])
+    return a
+
+
+def lag_stages(
+    t: np.ndarray, actuator: np.ndarray, commands: np.ndarray, tau: float, rows: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The lagged inputs at the middle and end of the steps that start at ``rows``.
+
+    Exact for commands held over each step (:func:`lagged_inputs`): the RK4 stages of a
+    step see the actuator move within it, as the vehicle did.
+    """
+    h = (t[rows + 1] - t[rows])[:, None]
+    c, offset = commands[rows], actuator[rows] - commands[rows]
+    return c + offset * np.exp(-0.5 * h / tau), c + offset * np.exp(-h / tau)
 
 
 def stage_inputs(
@@ -243,6 +358,7 @@ def as_trajectories(data: Any) -> list[Trajectory]:
         )
     if not items:
         raise ValueError("no trajectories to fit")
+    input_lag(items)  # one lag for all (a model has one)
     return items
 
 

@@ -17,7 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from identification.data import Trajectory, clock_line, logged_resolution
+from identification.data import (
+    LAG_SETTLE,
+    Trajectory,
+    clock_line,
+    input_lag,
+    logged_resolution,
+)
 from identification.features import compile_features, parse_term, term_name
 from identification.fit import (
     Gram,
@@ -388,6 +394,9 @@ def _disagreeing(
 INPUT_SHIFTS = (-3, -2, -1, 1, 2, 3)
 """Shifts of the inputs [rows] that :func:`input_shift_note` tries."""
 
+INPUT_LAGS = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0)
+"""First-order lags of the held inputs [median steps] that :func:`input_shift_note` tries."""
+
 SHIFT_GAIN = 0.9
 """A shift is named only where it leaves at most this share of an equation's residual."""
 
@@ -422,8 +431,9 @@ def input_shift_note(
     xi: np.ndarray,
     ratio: np.ndarray,
     command: str = "identify again",
+    shifts: Sequence[int] = INPUT_SHIFTS,
 ) -> str | None:
-    """A warning where the model's equations fit better with the inputs shifted a few rows.
+    """A warning where the model's equations fit better with the inputs shifted or lagged.
 
     A log that records each input a row late (a new-user trial: the 1-step delay of a
     logger) is fitted with made-up damping and controller-shaped terms, and the model drifts
@@ -438,6 +448,15 @@ def input_shift_note(
     model within 0.05 %) `score`, then without the long-run ratio, named a shift that made
     `y_dot'` fit 15 to 30 % better and `z_dot'`, `phi_dot'` far worse; following it raised
     the held-out score 30 times.
+
+    Held inputs are also passed through first-order lags of :data:`INPUT_LAGS` median steps
+    (:meth:`Trajectory.lag_inputs` from the logged commands, the first :data:`LAG_SETTLE`
+    longest time constants of each block cut): motors that lag their commands act like
+    inputs taken a few rows earlier, and no shift fits them (a planar trial at 40 ms:
+    ``phi_dot'`` to 31 % with 2 rows, to round-off with the lag). A lag passes the same bar,
+    where the equations gain together (an equation whose terms the lag made up may fit
+    worse), its time constant is refined between its grid neighbours, and it is named where
+    it leaves less of the residual than the best shift. ``shifts=()`` tries the lags alone.
     """
     inputs = set(trajs[0].input_names)
     variables = [*trajs[0].state_names, *trajs[0].input_names]
@@ -445,40 +464,89 @@ def input_shift_note(
               if any(f.var in inputs for j in np.flatnonzero(xi[i])
                      for f in parse_term(names[j], variables))]  # fmt: skip
     margin = max(abs(d) for d in INPUT_SHIFTS)
-    usable = long_enough(spread_blocks(trajs, SHIFT_ROWS), window + 2 * margin + 2)
+    blocks = spread_blocks(trajs, SHIFT_ROWS)
+    usable = long_enough(blocks, window + 2 * margin + 2)
     if not driven or not usable:
         return None
     refit = _own_terms_refit(xi, names, window, driven)
-
-    def residuals(shift: int) -> tuple[np.ndarray, np.ndarray]:
-        return refit([t.shift_inputs(shift, margin) for t in usable])
-
-    rss0, sigma0 = residuals(0)
-    bar = significance_bar(len(INPUT_SHIFTS) * len(driven))
+    applied_lag = input_lag(trajs)
+    dt = float(np.median([t.dt for t in usable]))
+    held = any(n not in trajs[0].measured for n in trajs[0].input_names)
+    lags = [m * dt for m in INPUT_LAGS if abs(m * dt - applied_lag) > 0.1 * applied_lag]
+    lags = [0.0, *lags] if applied_lag and held else lags if held else []
+    settle = int(np.ceil(LAG_SETTLE * max(lags, default=0.0) / dt))  # the actuator's start
+    lag_usable = long_enough(blocks, window + settle + 2) if lags else []
+    bar = significance_bar((len(shifts) + (len(lags) if lag_usable else 0)) * len(driven))
     scale = np.maximum(np.asarray(ratio, dtype=float)[driven], 1.0)
-    best: tuple[float, int, np.ndarray] | None = None
-    for shift in INPUT_SHIFTS:
-        rss, sigma2 = residuals(shift)
+
+    def gain(rss: np.ndarray, sigma2: np.ndarray, rss0: np.ndarray, sigma0: np.ndarray,
+             together: bool = False) -> Any:  # fmt: skip
+        """Residual shares where a candidate passes the bar and no equation fits worse.
+
+        With ``together`` (a lag) an equation may fit worse where the equations gain
+        together (the geometric mean of their shares under 1): a model fitted to commands
+        of lagging actuators holds input terms in equations they do not drive (a planar
+        trial: ``y'`` four times worse, ``phi_dot'`` exact with the lag).
+        """
         passes = (rss <= SHIFT_GAIN * rss0) & (rss0 - rss > bar * scale * sigma2)
         worse = rss - rss0 > bar * scale * sigma0
-        if passes.any() and not worse.any():
-            share = float(np.min(rss / np.maximum(rss0, 1e-300)))
+        shares = rss / np.maximum(rss0, 1e-300)
+        if together and worse.any():
+            worse = np.mean(np.log(shares)) >= 0.0
+        return shares if passes.any() and not worse.any() else None
+
+    rss0, sigma0 = refit([t.shift_inputs(0, margin) for t in usable])
+    best: tuple[float, float, np.ndarray, str] | None = None  # (share, shift or lag, shares, kind)
+    for shift in shifts:
+        shares = gain(*refit([t.shift_inputs(shift, margin) for t in usable]), rss0, sigma0)
+        if shares is not None and (best is None or shares.min() < best[0]):
+            best = (float(shares.min()), shift, shares, "shift")
+    if lag_usable:
+        lag0 = refit([t.slice(settle, len(t)) for t in lag_usable])
+
+        def lagged(tau: float) -> tuple[np.ndarray, np.ndarray]:
+            return refit([t.lag_inputs(tau, settle=False).slice(settle, len(t))
+                          for t in lag_usable])  # fmt: skip
+
+        found = [(tau, gain(*lagged(tau), *lag0, together=True)) for tau in lags]
+        passing = [(float(shares.min()), tau, shares) for tau, shares in found
+                   if shares is not None]  # fmt: skip
+        if passing:
+            share, tau, shares = min(passing)
+            if tau > 0:  # between the grid's neighbours: the lag that fits best
+                tau, shares = _closest_lag(lagged, lag0[0], tau, lags)
+                share = float(shares.min())
             if best is None or share < best[0]:
-                best = (share, shift, rss / np.maximum(rss0, 1e-300))
+                best = (share, tau, shares, "lag")
     if best is None:
         return None
-    _, shift, shares = best
+    _, value, shares, kind = best
     states = trajs[0].state_names
     pairs = [(states[i], share) for i, share in zip(driven, shares, strict=True)]
     listed = ", ".join(f"{s}' to {100 * r:.2g} %" for s, r in pairs if r <= SHIFT_GAIN)
     applied = int(trajs[0].meta.get("input_shift", 0))  # already shifted by --input-shift
     widest = max(INPUT_SHIFTS)
+    filtered = ("the states may be filtered estimates that lag the inputs (a low-pass filter "
+                "or a state estimator")  # fmt: skip
+    if kind == "lag":
+        tried = f"lags of {min(lags):.2g} to {max(lags):.2g} s and shifts up to {widest} rows"
+        if value == 0:
+            return (f"the model's terms fit the data better with the inputs acting as logged, "
+                    f"without the lag of {applied_lag:.2g} s (residual {listed}; {tried} tried)"
+                    f": {command} without --input-lag")  # fmt: skip
+        return (
+            f"the model's terms fit the data better with the inputs acting through a "
+            f"first-order lag of {value:.2g} s (residual {listed}; {tried} tried): the "
+            f"actuators may lag their commands (a motor's time constant), or {filtered}; no "
+            f"lag undoes a filter); {command} with --input-lag {value:.2g} if the actuators "
+            "lag (the other warnings may be its symptoms)"
+        )
+    shift = int(value)
     cause = (
         "the log may record the inputs late"
         if shift > 0
-        else "the actuators may lag (a motor's time constant: the library lacks it), the "
-        "states may be filtered estimates that lag the inputs (a low-pass filter or a state "
-        "estimator; no shift undoes a filter), or the log records the inputs early"
+        else f"the actuators may lag (a motor's time constant: --input-lag models it), "
+        f"{filtered}; no shift undoes a filter), or the log records the inputs early"
     )
     return (
         f"the model's terms fit the data better with the inputs taken {abs(shift)} row(s) "
@@ -486,6 +554,30 @@ def input_shift_note(
         f"rows tried): {cause}; {command} with --input-shift {applied + shift} if the "
         "log is off (the other warnings may be its symptoms)"
     )
+
+
+def _closest_lag(lagged: Any, rss0: np.ndarray, tau: float, lags: Sequence[float]) -> tuple:
+    """The lag between ``tau``'s neighbours in ``lags`` whose refit leaves the least residual.
+
+    Minimises the mean log residual share of the equations (golden section on log tau, to
+    about 3 %); returns the lag and its shares.
+    """
+    from scipy.optimize import minimize_scalar
+
+    grid = sorted(t for t in lags if t > 0)
+    i = grid.index(tau)
+    low, high = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    if low == high:
+        return tau, lagged(tau)[0] / np.maximum(rss0, 1e-300)
+
+    def cost(log_tau: float) -> float:
+        rss = lagged(float(np.exp(log_tau)))[0]
+        return float(np.mean(np.log(rss / np.maximum(rss0, 1e-300))))
+
+    found = minimize_scalar(cost, bounds=(np.log(low), np.log(high)), method="bounded",
+                            options={"xatol": 0.03})  # fmt: skip
+    best = float(np.exp(found.x)) if cost(found.x) <= cost(np.log(tau)) else tau
+    return best, lagged(best)[0] / np.maximum(rss0, 1e-300)
 
 
 def _own_terms_refit(xi: np.ndarray, names: Sequence[str], window: int, rows: Sequence[int]) -> Any:

@@ -50,7 +50,13 @@ from pysindy.optimizers import BaseOptimizer
 from sklearn.base import clone
 from threadpoolctl import threadpool_limits
 
-from identification.data import Trajectory, as_trajectories, check_glitches, data_ranges
+from identification.data import (
+    Trajectory,
+    as_trajectories,
+    check_glitches,
+    data_ranges,
+    input_lag,
+)
 from identification.features import compile_features, compile_rhs, parse_term, term_name
 from identification.model import IdentifiedModel
 from identification.stepwise import simpler_twins, stepwise_coefficients
@@ -1242,6 +1248,7 @@ def fit(
         **config.label,
         "n_trajectories": len(trajs),
         **({"measured_inputs": list(trajs[0].measured)} if trajs[0].measured else {}),
+        **({"input_lag": lag} if (lag := input_lag(trajs)) else {}),
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "conditioning": conditioning,

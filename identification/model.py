@@ -225,7 +225,9 @@ class IdentifiedModel:
 
         Commands are held over their step. Inputs the model was identified with as measured
         signals (``meta.measured_inputs``) are interpolated within each step as in the fit
-        (the last step holds them).
+        (the last step holds them). A model identified with its inputs acting through a lag
+        (``meta.input_lag``, :meth:`~identification.data.Trajectory.lag_inputs`) is given the
+        commands and lags them as the fit did, its actuators starting at the first command.
         """
         if isinstance(substeps, bool) or not isinstance(substeps, int | np.integer) or substeps < 1:
             raise ValueError(f"substeps must be a positive integer, got {substeps!r}")
@@ -263,18 +265,29 @@ class IdentifiedModel:
         out = np.empty((len(inputs) + 1, x0.size))
         out[0] = x = x0
         measured = [self.input_names.index(n) for n in self.meta.get("measured_inputs", ())]
-        if measured:  # signals, not commands: interpolated within each step as in the fit
-            from identification.data import stage_inputs
+        lag = float(self.meta.get("input_lag", 0.0))
+        held = [k for k in range(inputs.shape[1]) if k not in measured]
+        lagged = lag > 0 and bool(held)
+        if measured or lagged:  # inputs that move within each step, as in the fit
+            from identification.data import lag_stages, lagged_inputs, stage_inputs
             from identification.fit import rk4_steps
 
-            t = np.concatenate([[0.0], np.cumsum(steps[:-1])])
-            rows = np.arange(len(inputs) - 1)
-            stages = stage_inputs(t, inputs, rows, measured)
-            for k in rows:
-                x = rk4_steps(self.rhs, x[None, :], tuple(s[k : k + 1] for s in stages),
-                              steps[k : k + 1], substeps)[0]  # fmt: skip
+            t = np.concatenate([[0.0], np.cumsum(steps)])  # (one more: the last step's end)
+            commands = inputs
+            if lagged:  # commands: the actuators' output at each row, and within the step
+                inputs = inputs.copy()
+                inputs[:, held] = lagged_inputs(t[:-1], commands[:, held], lag)
+            um, u1 = inputs.copy(), inputs.copy()  # the last step holds measured signals
+            inner = np.arange(len(inputs) - 1)
+            _, um[inner], u1[inner] = stage_inputs(t[:-1], inputs, inner, measured)
+            if lagged:
+                every = np.arange(len(inputs))
+                um[:, held], u1[:, held] = lag_stages(t, inputs[:, held], commands[:, held],
+                                                      lag, every)  # fmt: skip
+            for k in range(len(inputs)):
+                x = rk4_steps(self.rhs, x[None, :], (inputs[k : k + 1], um[k : k + 1],
+                              u1[k : k + 1]), steps[k : k + 1], substeps)[0]  # fmt: skip
                 out[k + 1] = x
-            out[-1] = rk4_step(self.rhs, x, inputs[-1], steps[-1], substeps)  # held: no later row
             return out
         for k, u in enumerate(inputs):
             x = rk4_step(self.rhs, x, u, steps[k], substeps)
@@ -403,6 +416,10 @@ def _check_meta(meta: dict[str, Any], inputs: Sequence[str], source: str) -> Non
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= 10**6:
             raise ValueError(f"{source}: meta.{key} must be a whole number from {low} to "
                              f"{10**6}, got {value!r}")  # fmt: skip
+    lag = meta.get("input_lag", 0.0)
+    if isinstance(lag, bool) or not isinstance(lag, int | float) or not 0 <= lag < 1e6:
+        raise ValueError(f"{source}: meta.input_lag must be a time constant >= 0 [s], "
+                         f"got {lag!r}")  # fmt: skip
     if not isinstance(meta.get("time_column", "t"), str):
         raise ValueError(f"{source}: meta.time_column must be a column name (a string)")
     if not isinstance(meta.get("units", {}), dict):  # (a string was read as seconds, silently)

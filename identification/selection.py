@@ -83,10 +83,12 @@ from identification.data import (
     as_trajectories,
     check_glitches,
     data_ranges,
+    input_lag,
 )
 from identification.diagnostics import (
     AR1_MAX,
     AR1_MIN,
+    INPUT_SHIFTS,
     angle_offset_note,
     cut_steps,
     data_warnings,
@@ -747,13 +749,19 @@ def _select_model(
         moved = [i for i, cols in grown.items() if set(np.flatnonzero(xi[i])) != set(cols)]
         stale = tuple(f"{first.state_names[i]}': the best support of" for i in moved)
         report.warnings = [w for w in report.warnings if not w.startswith(stale)]
-    if not np.any(xi):
-        raise ValueError(_empty_model_message(candidates, report.hold))
+    if not np.any(xi):  # the least sparse fit may still tell inputs logged out of time
+        w0 = min(pilots)
+        hint = input_shift_note(used, names, w0, pilots[w0],
+                                long_run_ratio(used, names, pilots[w0], w0))  # fmt: skip
+        raise ValueError(_empty_model_message(candidates, report.hold)
+                         + (f"; the least sparse fit says: {hint}" if hint else ""))  # fmt: skip
     # An input in a kinematic relation is the sign of inputs that changed within the step;
     # whole-row shifts fit such logs a little better and worse predict (a trial: 30 % -> 35 %
     # at 1 s with the shift advised), so the input-shift note is not given beside it.
+    # (a first-order lag of the actuators puts inputs there too, and is still named)
     driven = kinematic_input_note(used, names, xi)
-    shifted = None if driven else input_shift_note(used, names, best.window, xi, ratio)
+    shifted = input_shift_note(used, names, best.window, xi, ratio,
+                               shifts=() if driven else INPUT_SHIFTS)  # fmt: skip
     shifted = shifted or state_shift_note(used, names, best.window, xi, ratio)
     shifted = shifted or angle_offset_note(xi, names, first.state_names)
     for note in (shifted, driven):  # before the notes they cause (outlying steps, misfit)
@@ -806,6 +814,7 @@ def _select_model(
         **final_cfg.label,
         "n_trajectories": len(trajs),
         **({"measured_inputs": list(trajs[0].measured)} if trajs[0].measured else {}),
+        **({"input_lag": lag} if (lag := input_lag(trajs)) else {}),
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "ranges": data_ranges(trajs),
@@ -952,8 +961,9 @@ def _empty_model_message(candidates: Sequence[Candidate], hold: float) -> str:
         "the identified model has no term: no model with terms predicts the held-out data "
         f"significantly better than holding the state (best with terms: {terms}, "
         f"score {top.mean:.3g}{against}); the library may not contain the dynamics, or the "
-        "inputs do not explain the states (lagged, mislabelled or closed-loop inputs, or "
-        "commands the actuators did not follow: log the applied inputs)"
+        "inputs do not explain the states (lagged: --input-lag SECONDS fits commands that "
+        "act through a first-order lag; mislabelled or closed-loop inputs, or commands the "
+        "actuators did not follow: log the applied inputs)"
     )
 
 

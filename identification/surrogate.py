@@ -48,6 +48,14 @@ def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: b
         raise ValueError("a surrogate env needs model= (a model object or a model JSON path)")
     if not isinstance(model, IdentifiedModel):
         model = load_model(_model_path(model, "an IdentifiedModel"))
+    lag = model.meta.get("input_lag", 0.0)
+    if lag:  # the env steps its action held over the step: it would drop the lag silently
+        raise ValueError(
+            f"the model's inputs act through a first-order lag of {lag:g} s (identified with "
+            "--input-lag) and a surrogate env steps its action at once, with no actuator "
+            "state: use the model's simulate(), which lags the commands, or identify from "
+            "logged actuator outputs"
+        )
     vehicle = cls.vehicle
     ours = (model.state_names, model.input_names)
     theirs = (vehicle.state_names, vehicle.input_names)

@@ -7,6 +7,7 @@ Outputs are checked for writability before any long computation starts.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -50,6 +51,31 @@ def _shifted(trajs: list, rows: int) -> tuple[list, str]:
               f"to shift its inputs {rows} rows")  # fmt: skip
     short = len(trajs) - len(kept)
     return kept, (f"; {short} segment(s) too short for the shift left out" if short else "")
+
+
+def _lagged(trajs: list, tau: float) -> tuple[list, str]:
+    """The segments with their held inputs lagged ``tau`` s, and what was lagged (one line)."""
+    if not (math.isfinite(tau) and tau >= 0):
+        _fail(f"--input-lag is a time constant >= 0 [s], got {tau:g}")
+    held = [n for n in trajs[0].input_names if n not in trajs[0].measured]
+    if not held:
+        _fail("--input-lag lags commands held over each step, and the data have none (every "
+              "input is --measured or there are no inputs)")  # fmt: skip
+    from identification.data import LAG_SETTLE
+
+    kept = []
+    for t in trajs:
+        with contextlib.suppress(ValueError):  # (too short to settle: counted below)
+            kept.append(t.lag_inputs(tau))
+    if not kept:
+        _fail(f"every segment (the longest {max(t.t[-1] - t.t[0] for t in trajs):g} s) is too "
+              f"short for actuators of a {tau:g} s lag to settle ({LAG_SETTLE:g} time "
+              "constants)")  # fmt: skip
+    short = len(trajs) - len(kept)
+    short_note = f"; {short} segment(s) too short for it left out" if short else ""
+    return kept, (f"{', '.join(held)} acting through a first-order lag of {tau:g} s "
+                  f"(--input-lag; each segment's first {LAG_SETTLE * tau:g} s left out, while "
+                  f"the actuators' start settles){short_note}")  # fmt: skip
 
 
 def _names(text: str | None) -> list[str] | None:
@@ -567,6 +593,14 @@ def identify(
             max=100,
         ),
     ] = 0,
+    input_lag: Annotated[
+        float,
+        typer.Option(
+            help="time constant [s] of a first-order lag the held inputs act through (the "
+            "actuators of a log of commands; each step's mean of the lagged command is fitted)",
+            metavar="SECONDS",
+        ),
+    ] = 0.0,
     plot: Annotated[
         Path | None,
         typer.Option(help="selection plot (default: OUT.png)", parser=_file_name, metavar="FILE"),
@@ -681,6 +715,12 @@ def identify(
             typer.echo(f"data: inputs taken {abs(input_shift)} row(s) "
                        f"{'later' if input_shift > 0 else 'earlier'} (--input-shift)"
                        + dropped)  # fmt: skip
+        if input_lag:
+            if method == "paper":
+                _fail("the paper's method has no input lag: leave out --input-lag")
+            trajs, lagged = _lagged(trajs, input_lag)
+            first = trajs[0]
+            typer.echo(f"data: {lagged}")
         if method == "paper":
             from identification.experiments.paper import PAPER_LAMBDA, fit_paper
 
@@ -840,6 +880,15 @@ def score(
             max=100,
         ),
     ] = None,
+    input_lag: Annotated[
+        float | None,
+        typer.Option(
+            help="first-order lag [s] of the held inputs (default: the model's own "
+            "--input-lag from identify)",
+            metavar="SECONDS",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Predicts held-out logs open loop with their recorded inputs: error after --seconds.
 
@@ -895,6 +944,11 @@ def score(
             when = "later" if shift > 0 else "earlier"
             source = "as in training" if input_shift is None else "as --input-shift asks"
             typer.echo(f"data: inputs taken {abs(shift)} row(s) {when}, {source}{dropped}")
+        lag = loaded.meta.get("input_lag", 0.0) if input_lag is None else input_lag
+        if lag:  # the actuators' lag the model was identified with
+            trajs, lagged = _lagged(trajs, float(lag))
+            source = "as in training" if input_lag is None else "as --input-lag asks"
+            typer.echo(f"data: {lagged}, {source}")
         periods = sorted(t.dt for t in trajs)
         if periods[-1] > 1.01 * periods[0]:  # one horizon in steps must be one in seconds
             _fail(f"the logs' sample steps differ ({periods[0]:g} s to {periods[-1]:g} s): "

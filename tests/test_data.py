@@ -651,3 +651,64 @@ def test_logs_in_degrees_and_milliseconds_give_the_si_model_and_score_reads_them
     path = str(write_trajectory_csv(tmp_path / "us.csv", micro))
     said = CliRunner().invoke(app, ["identify", path, "--out", str(tmp_path / "us.json"), *fixed])
     assert "a log in microseconds" in said.output and "--time-unit us" in said.output
+
+
+def test_lagged_inputs_follow_a_first_order_actuator_exactly():
+    """``a' = (c - a) / tau`` with each command held over its own step: the rows, the RK4
+    stage points and a model's simulation against scipy's integration of the actuator."""
+    from scipy.integrate import solve_ivp
+
+    from identification.data import LAG_SETTLE, lag_stages, lagged_inputs
+    from identification.model import IdentifiedModel
+
+    rng = np.random.default_rng(4)
+    tau, n = 0.03, 60
+    for steps in (np.full(n - 1, 0.01), rng.uniform(0.005, 0.015, n - 1)):  # jitter too
+        t = np.concatenate([[0.0], np.cumsum(steps)])
+        c = rng.normal(size=(n, 2))
+        a, ref, mid = lagged_inputs(t, c, tau), [c[0]], []
+        for k in range(n - 1):
+            sol = solve_ivp(lambda s, y, k=k, c=c: (c[k] - y) / tau, (0, steps[k]), ref[-1],
+                            t_eval=[steps[k] / 2, steps[k]], rtol=1e-12, atol=1e-14)  # fmt: skip
+            mid.append(sol.y[:, 0])
+            ref.append(sol.y[:, 1])
+        np.testing.assert_allclose(a, ref, atol=1e-10)
+        rows = np.arange(n - 1)
+        half, end = lag_stages(t, a, c, tau, rows)
+        np.testing.assert_allclose(half, mid, atol=1e-10)
+        np.testing.assert_allclose(end, ref[1:], atol=1e-10)
+    # a model fitted on lagged inputs is given commands: y_dot' = u1, phi_dot' = 200 u2
+    xi = np.array([[1.0, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 200]])
+    model = IdentifiedModel(["y_dot", "phi_dot", "u1", "u2"], xi, ("y", "phi", "y_dot",
+                            "phi_dot"), ("u1", "u2"), None, {"input_lag": tau})  # fmt: skip
+    z, ref = np.array([0, 0, 0, 0, *c[0]]), [np.zeros(4)]
+    for k in range(20):  # the states and the actuators, one held command at a time
+        z = solve_ivp(lambda s, z, k=k: [z[2], z[3], z[4], 200 * z[5], *(c[k] - z[4:]) / tau],
+                      (0, 0.01), z, rtol=1e-12, atol=1e-14).y[:, -1]  # fmt: skip
+        ref.append(z[:4])
+    got = model.simulate(np.zeros(4), c[:20], 0.01)
+    np.testing.assert_allclose(got, ref, rtol=1e-4, atol=1e-8)  # (RK4's own error: (h/tau)^5)
+    model.meta.pop("input_lag")  # the commands taken as acting at once: far off
+    assert (
+        np.abs(model.simulate(np.zeros(4), c[:20], 0.01) - ref).max()
+        > 1e3 * np.abs(got - ref).max()
+    )
+    # the trajectory keeps its commands: lagging again starts from them, and 0 undoes it
+    t = np.arange(n) * 0.01
+    tr = Trajectory(t, rng.normal(size=(n, 4)), c, ("y", "phi", "y_dot", "phi_dot"),
+                    ("u1", "u2"), measured=("u1",))  # fmt: skip
+    once = tr.lag_inputs(tau)
+    settle = int(np.searchsorted(t, LAG_SETTLE * tau))
+    assert len(once) == n - settle and once.meta["input_lag"] == tau
+    np.testing.assert_array_equal(once.u[:, 0], c[settle:, 0])  # measured: a signal, kept
+    np.testing.assert_allclose(once.u[:, 1], lagged_inputs(t, c[:, 1:], tau)[settle:, 0])
+    again = once.lag_inputs(2 * tau, settle=False)
+    np.testing.assert_allclose(again.u[:, 1], lagged_inputs(t[settle:], c[settle:, 1:],
+                                                            2 * tau)[:, 0])  # fmt: skip
+    back = once.lag_inputs(0.0)
+    np.testing.assert_array_equal(back.u, c[settle:])
+    assert back.commands is None and "input_lag" not in back.meta
+    with pytest.raises(ValueError, match="too short for its actuators to settle"):
+        tr.slice(0, 22).lag_inputs(tau)
+    with pytest.raises(ValueError, match="different lags"):
+        select_model([once, tr], planar_library())

@@ -337,6 +337,18 @@ def test_a_surrogate_model_of_another_type_is_refused_by_name():
             gym.make(env_id, model=5)
 
 
+def test_a_model_of_lagging_actuators_is_refused_as_a_surrogate_not_stepped_without_it():
+    """The env steps its action held over the step: a model fitted to lagged commands
+    (``--input-lag``) would fly without its lag, silently."""
+    from identification.model import IdentifiedModel
+
+    names = ("y", "z", "phi", "y_dot", "z_dot", "phi_dot")
+    model = IdentifiedModel(["u2"], np.ones((6, 1)), names, ("u1", "u2"), None,
+                            {"input_lag": 0.04})  # fmt: skip
+    with pytest.raises(ValueError, match="first-order lag of 0.04 s .* no actuator state"):
+        gym.make("PlanarQuadSINDy-v0", model=model)
+
+
 def test_train_checks_its_seed_first_follows_the_umask_and_names_a_corrupt_curve(tmp_path):
     """``--seed -1`` left an empty folder, model.zip was 0644 under umask 077, and a corrupt
     learning curve gave "could not convert string to float" with no file named."""

@@ -329,7 +329,7 @@ GUST_TAU = 0.4
 
 def gusty_planar_flights(
     params: PlanarQuadParams, gust: float, seed: int, flights: int = 3, steps: int = 1200,
-    dt: float = 0.01,
+    dt: float = 0.01, lag: float = 0.0,
 ) -> list[Trajectory]:  # fmt: skip
     """Planar PD flights in unmeasured gusts: data from a simulator of its own, not the envs'.
 
@@ -340,12 +340,17 @@ def gusty_planar_flights(
     AR(1) dither on both inputs (5 % of m g, and 15 Ixx); the applied inputs are logged,
     held over each step, the gusts are not. The controller answers the gusts, so the inputs
     correlate with the equation errors: the closed-loop case of unmeasured forces.
+
+    With ``lag`` > 0 [s] the actuators follow the commands through a first-order lag (a
+    motor's time constant; integrated with the states) and the *commands* are logged: the
+    case of :meth:`Trajectory.lag_inputs`.
     """
     rng = np.random.default_rng(seed)
     m, ixx, g = params.mass, params.Ixx, 9.81
     out = []
     for _ in range(flights):
         x, force, dither = np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(2)
+        act = np.array([m * g, 0.0])  # the actuators' output (the command where no lag)
         goals = rng.uniform([-1.5, 0.5], [1.5, 2.5], size=(6, 2))
         states, inputs = np.empty((steps, 6)), np.empty((steps, 2))
         for k in range(steps):
@@ -363,16 +368,20 @@ def gusty_planar_flights(
                 force = a * force + np.sqrt(1 - a * a) * kick
 
                 def f(s: np.ndarray, d: np.ndarray = force, u: np.ndarray = u) -> np.ndarray:
-                    return np.array([s[3], s[4], s[5], (d[0] - u[0] * np.sin(s[2])) / m,
-                                     (u[0] * np.cos(s[2]) - m * g + d[1]) / m,
-                                     (u[1] + d[2]) / ixx])  # fmt: skip
+                    thrust, moment = s[6:] if lag > 0 else u
+                    rates = (u - s[6:]) / lag if lag > 0 else np.zeros(2)
+                    return np.array([s[3], s[4], s[5], (d[0] - thrust * np.sin(s[2])) / m,
+                                     (thrust * np.cos(s[2]) - m * g + d[1]) / m,
+                                     (moment + d[2]) / ixx, *rates])  # fmt: skip
 
-                k1 = f(x)
-                k2 = f(x + h / 2 * k1)
-                k3 = f(x + h / 2 * k2)
-                x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + f(x + h * k3))
+                s0 = np.concatenate([x, act])
+                k1 = f(s0)
+                k2 = f(s0 + h / 2 * k1)
+                k3 = f(s0 + h / 2 * k2)
+                s0 = s0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + f(s0 + h * k3))
+                x, act = s0[:6], s0[6:]
         t = np.arange(steps) * dt
-        meta = {"gust": gust}
+        meta = {"gust": gust, "lag": lag}
         out.append(Trajectory(t, states, inputs, PLANAR_STATE_NAMES, PLANAR_INPUT_NAMES, meta=meta))
     return out
 
