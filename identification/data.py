@@ -253,13 +253,43 @@ of the actuators' offset from the first command is left): :meth:`Trajectory.lag_
 leaves out the rows before."""
 
 
-def input_lag(trajs: Sequence[Trajectory]) -> float:
+def input_lag_of(trajs: Sequence[Trajectory]) -> float:
     """The first-order lag [s] the trajectories' inputs act through (0: none; one for all)."""
     lags = sorted({float(t.meta.get("input_lag", 0.0)) for t in trajs})
     if len(lags) > 1:
         raise ValueError(f"the trajectories' inputs act through different lags {lags} s: "
                          "give them all the same (Trajectory.lag_inputs)")  # fmt: skip
     return lags[0] if lags else 0.0
+
+
+def lag_segments(trajs: Sequence[Trajectory], tau: float) -> tuple[list[Trajectory], int]:
+    """Each segment's held inputs lagged ``tau`` s (:meth:`Trajectory.lag_inputs`).
+
+    Returns the lagged segments and how many were too short to settle (left out).
+
+    Raises:
+        ValueError: ``tau`` is not a time constant, no input is held, or every segment is
+            too short.
+    """
+    if isinstance(tau, bool) or not isinstance(tau, int | float | np.floating | np.integer):
+        raise TypeError(f"an input lag is a number of seconds, got {tau!r}")
+    if not math.isfinite(tau) or tau < 0:
+        raise ValueError(f"an input lag is a time constant >= 0 [s], got {tau!r}")
+    if tau and all(n in trajs[0].measured for n in trajs[0].input_names):
+        raise ValueError("an input lag lags commands held over each step, and the data have "
+                         "none (every input is measured, or there are no inputs)")  # fmt: skip
+    kept = []
+    for tr in trajs:
+        try:
+            kept.append(tr.lag_inputs(tau))
+        except ValueError:  # too short to settle: counted
+            continue
+    if not kept:
+        longest = max(t.t[-1] - t.t[0] for t in trajs)
+        raise ValueError(f"every segment (the longest {longest:g} s) is too short for "
+                         f"actuators of a {tau:g} s lag to settle ({LAG_SETTLE:g} time "
+                         "constants)")  # fmt: skip
+    return kept, len(trajs) - len(kept)
 
 
 def lagged_inputs(t: np.ndarray, commands: np.ndarray, tau: float) -> np.ndarray:
@@ -358,7 +388,7 @@ def as_trajectories(data: Any) -> list[Trajectory]:
         )
     if not items:
         raise ValueError("no trajectories to fit")
-    input_lag(items)  # one lag for all (a model has one)
+    input_lag_of(items)  # one lag for all (a model has one)
     return items
 
 

@@ -21,7 +21,7 @@ from identification.data import (
     LAG_SETTLE,
     Trajectory,
     clock_line,
-    input_lag,
+    input_lag_of,
     logged_resolution,
 )
 from identification.features import compile_features, parse_term, term_name
@@ -424,6 +424,21 @@ def spread_blocks(trajs: Sequence[Trajectory], rows: int, block: int = 2000) -> 
     return [parts[i] for i in picks]
 
 
+@dataclasses.dataclass(frozen=True)
+class InputTiming:
+    """What :func:`input_timing` found: its note, and the shift or lag that fits best.
+
+    Attributes:
+        note: The warning, in words.
+        kind: ``"shift"`` (whole rows) or ``"lag"`` (a first-order time constant).
+        value: The shift [rows, from the data as given] or the lag [s, from the commands].
+    """
+
+    note: str
+    kind: str
+    value: float
+
+
 def input_shift_note(
     trajs: Sequence[Trajectory],
     names: list[str],
@@ -433,7 +448,21 @@ def input_shift_note(
     command: str = "identify again",
     shifts: Sequence[int] = INPUT_SHIFTS,
 ) -> str | None:
-    """A warning where the model's equations fit better with the inputs shifted or lagged.
+    """:func:`input_timing`'s note (None where the inputs fit best as they are)."""
+    found = input_timing(trajs, names, window, xi, ratio, command, shifts)
+    return None if found is None else found.note
+
+
+def input_timing(
+    trajs: Sequence[Trajectory],
+    names: list[str],
+    window: int,
+    xi: np.ndarray,
+    ratio: np.ndarray,
+    command: str = "identify again",
+    shifts: Sequence[int] = INPUT_SHIFTS,
+) -> InputTiming | None:
+    """Where the model's equations fit better with the inputs shifted or lagged: how, and a note.
 
     A log that records each input a row late (a new-user trial: the 1-step delay of a
     logger) is fitted with made-up damping and controller-shaped terms, and the model drifts
@@ -469,7 +498,7 @@ def input_shift_note(
     if not driven or not usable:
         return None
     refit = _own_terms_refit(xi, names, window, driven)
-    applied_lag = input_lag(trajs)
+    applied_lag = input_lag_of(trajs)
     dt = float(np.median([t.dt for t in usable]))
     held = any(n not in trajs[0].measured for n in trajs[0].input_names)
     lags = [m * dt for m in INPUT_LAGS if abs(m * dt - applied_lag) > 0.1 * applied_lag]
@@ -531,16 +560,18 @@ def input_shift_note(
     if kind == "lag":
         tried = f"lags of {min(lags):.2g} to {max(lags):.2g} s and shifts up to {widest} rows"
         if value == 0:
-            return (f"the model's terms fit the data better with the inputs acting as logged, "
-                    f"without the lag of {applied_lag:.2g} s (residual {listed}; {tried} tried)"
-                    f": {command} without --input-lag")  # fmt: skip
-        return (
+            return InputTiming(
+                f"the model's terms fit the data better with the inputs acting as logged, "
+                f"without the lag of {applied_lag:.2g} s (residual {listed}; {tried} tried): "
+                f"{command} with --input-lag 0", "lag", 0.0,
+            )  # fmt: skip
+        return InputTiming(
             f"the model's terms fit the data better with the inputs acting through a "
             f"first-order lag of {value:.2g} s (residual {listed}; {tried} tried): the "
             f"actuators may lag their commands (a motor's time constant), or {filtered}; no "
             f"lag undoes a filter); {command} with --input-lag {value:.2g} if the actuators "
-            "lag (the other warnings may be its symptoms)"
-        )
+            "lag (the other warnings may be its symptoms)", "lag", float(f"{value:.2g}"),
+        )  # fmt: skip
     shift = int(value)
     cause = (
         "the log may record the inputs late"
@@ -548,12 +579,12 @@ def input_shift_note(
         else f"the actuators may lag (a motor's time constant: --input-lag models it), "
         f"{filtered}; no shift undoes a filter), or the log records the inputs early"
     )
-    return (
+    return InputTiming(
         f"the model's terms fit the data better with the inputs taken {abs(shift)} row(s) "
         f"{'later' if shift > 0 else 'earlier'} (residual {listed}; shifts up to {widest} "
         f"rows tried): {cause}; {command} with --input-shift {applied + shift} if the "
-        "log is off (the other warnings may be its symptoms)"
-    )
+        "log is off (the other warnings may be its symptoms)", "shift", float(shift),
+    )  # fmt: skip
 
 
 def _closest_lag(lagged: Any, rss0: np.ndarray, tau: float, lags: Sequence[float]) -> tuple:

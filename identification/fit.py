@@ -55,7 +55,7 @@ from identification.data import (
     as_trajectories,
     check_glitches,
     data_ranges,
-    input_lag,
+    input_lag_of,
 )
 from identification.features import compile_features, compile_rhs, parse_term, term_name
 from identification.model import IdentifiedModel
@@ -1248,7 +1248,7 @@ def fit(
         **config.label,
         "n_trajectories": len(trajs),
         **({"measured_inputs": list(trajs[0].measured)} if trajs[0].measured else {}),
-        **({"input_lag": lag} if (lag := input_lag(trajs)) else {}),
+        **({"input_lag": lag} if (lag := input_lag_of(trajs)) else {}),
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "conditioning": conditioning,

@@ -83,19 +83,21 @@ from identification.data import (
     as_trajectories,
     check_glitches,
     data_ranges,
-    input_lag,
+    input_lag_of,
+    lag_segments,
 )
 from identification.diagnostics import (
     AR1_MAX,
     AR1_MIN,
     INPUT_SHIFTS,
+    InputTiming,
     angle_offset_note,
     cut_steps,
     data_warnings,
     disagreement_note,
     empty_equation_note,
     equation_error_ar1,
-    input_shift_note,
+    input_timing,
     kinematic_input_note,
     misfit_note,
     outlier_note,
@@ -198,6 +200,18 @@ class Candidate:
             self.mean = self.se = float("inf")
 
 
+class NoModelError(ValueError):
+    """The selection's refusal where no model with terms predicts better than holding the state.
+
+    Attributes:
+        timing: The shift or lag of the inputs the least sparse fit named (None: none).
+    """
+
+    def __init__(self, message: str, timing: InputTiming | None = None) -> None:
+        super().__init__(message)
+        self.timing = timing
+
+
 @dataclass
 class SelectionReport:
     """What :func:`select_model` tried and why it chose what it chose.
@@ -217,6 +231,8 @@ class SelectionReport:
             least sparse window-1 fit's: :func:`equation_error_ar1`; None: at round-off, or
             not an integral formulation).
         ar1: The coefficient the rows were prewhitened with (0: not prewhitened).
+        timing: The shift or lag of the inputs the timing check named on the model
+            (:func:`~identification.diagnostics.input_timing`; None: none).
     """
 
     candidates: list[Candidate]
@@ -229,6 +245,7 @@ class SelectionReport:
     final_terms: int | None = None
     error_ar1: float | None = None
     ar1: float = 0.0
+    timing: InputTiming | None = None
 
     @property
     def best(self) -> Candidate:
@@ -373,6 +390,7 @@ def select_model(
     progress: bool = False,
     drop_outliers: bool = False,
     prewhiten: bool | None = None,
+    input_lag: float | None = None,
 ) -> tuple[IdentifiedModel, SelectionReport]:
     """Identifies a model and chooses its sparsity and window from the data alone.
 
@@ -401,6 +419,12 @@ def select_model(
             :data:`AR1_EXTRA_TERMS` terms beyond the plain one; True: the prewhitened model
             wherever the errors are positively correlated; False: never. Prewhitened fits
             are at window 1, whatever ``windows`` holds.
+        input_lag: The time constant [s] of a first-order lag the held inputs act through
+            (:meth:`Trajectory.lag_inputs`; 0: they act as given). None (default): as
+            given, and where the timing check names a lag on the model (or, where no model
+            predicts better than holding the state, on the least sparse fit) and the data
+            carry none of their own, the selection runs again with it and keeps it (a log of
+            the commands of motors that lag them; :data:`INPUT_LAGS` tried).
 
     Returns:
         The model (scores in ``meta["selection"]``, ensemble statistics attached) and the
@@ -416,10 +440,84 @@ def select_model(
         raise TypeError(f"prewhiten must be None, True or False, got {prewhiten!r}")
     prewhiten = None if prewhiten is None else bool(prewhiten)  # np.False_ is not False
     trajs = as_trajectories(trajs)  # (read once: an iterator is selected from twice)
+    if input_lag is not None:
+        trajs, _ = lag_segments(trajs, input_lag)
     settings = dict(config=config, lambdas=lambdas, windows=windows, folds=folds,
                     horizon=horizon, n_models=n_models, seed=seed, system=system,
                     progress=progress, drop_outliers=drop_outliers)  # fmt: skip
-    model, report = _select_model(trajs, library, **settings)
+    auto = input_lag is None and not input_lag_of(trajs)
+    try:
+        plain = _select_model(trajs, library, **settings)
+    except NoModelError as refusal:
+        lag = _named_lag(refusal.timing) if auto else None
+        if lag is None:
+            raise
+        try:
+            model, report = _select_prewhitened(lag_segments(trajs, lag)[0], library, settings,
+                                                prewhiten)  # fmt: skip
+        except ValueError:
+            raise refusal from None
+        report.warnings.insert(0, _lag_note(lag, "no model of the inputs as logged predicted "
+                                                 "better than holding the state"))  # fmt: skip
+        return _finished(model, report)
+    lag = _named_lag(plain[1].timing) if auto else None
+    if lag is None:
+        return _finished(*_select_prewhitened(trajs, library, settings, prewhiten, plain))
+    try:
+        model, report = _select_prewhitened(lag_segments(trajs, lag)[0], library, settings,
+                                            prewhiten)  # fmt: skip
+    except ValueError as exc:
+        model, report = _select_prewhitened(trajs, library, settings, prewhiten, plain)
+        report.warnings.append(f"the timing check named a first-order lag of the inputs of "
+                               f"{lag:.2g} s, and the selection with it failed ({exc}): the "
+                               "inputs are kept as logged")  # fmt: skip
+        return _finished(model, report)
+    ours, theirs = _relative_score(report), _relative_score(plain[1])
+    if ours > theirs:  # a lag that predicts the held-out parts worse is not the vehicle's
+        model, report = _select_prewhitened(trajs, library, settings, prewhiten, plain)
+        report.warnings.append(
+            f"the timing check named a first-order lag of the inputs of {lag:.2g} s, but the "
+            f"model selected with it predicts its held-out data worse ({ours:.3g} of holding "
+            f"the state, against {theirs:.3g}): the inputs are kept as logged"
+        )
+        return _finished(model, report)
+    why = f"the model of the inputs as logged had {plain[0].n_terms} terms, score {theirs:.3g}"
+    report.warnings.insert(0, _lag_note(lag, f"{why} of holding the state; with it {ours:.3g}"))
+    return _finished(model, report)
+
+
+def _relative_score(report: SelectionReport) -> float:
+    """The chosen candidate's score as a share of holding the state's (lower is better)."""
+    return report.best.mean / report.hold if report.hold > 0 else float("inf")
+
+
+def _named_lag(timing: InputTiming | None) -> float | None:
+    """The lag a timing check named (None where it named none, or a shift)."""
+    return timing.value if timing and timing.kind == "lag" and timing.value > 0 else None
+
+
+def _lag_note(lag: float, why: str) -> str:
+    """The note of a selection run again with the lag the timing check named."""
+    return (
+        f"the inputs act through a first-order lag of {lag:.2g} s (the actuators lag their "
+        f"commands): the timing check named it and the model was selected with it ({why}; "
+        "--input-lag 0 or input_lag=0 keeps the inputs as logged). Where the states are "
+        "instead filtered estimates that lag the inputs, no lag undoes the filter"
+    )
+
+
+def _select_prewhitened(
+    trajs: list[Trajectory],
+    library: Sequence[str],
+    settings: dict,
+    prewhiten: bool | None,
+    plain: tuple[IdentifiedModel, SelectionReport] | None = None,
+) -> tuple[IdentifiedModel, SelectionReport]:
+    """The plain selection, and the prewhitened one where the equation errors call for it.
+
+    ``plain``: the plain selection, already run.
+    """
+    model, report = plain or _select_model(trajs, library, **settings)
     rho = report.error_ar1
     if prewhiten is False and rho is not None and rho > AR1_MIN:
         report.warnings.append(_ar1_note(rho, report, None, None))
@@ -430,7 +528,7 @@ def select_model(
                 f"prewhitening was asked for, but the equation errors are not correlated in "
                 f"time ({why}): the plain fit is kept"
             )
-        return _finished(model, report)
+        return model, report
     ar1 = min(rho, AR1_MAX)
     try:
         white, white_report = _select_model(trajs, library, **settings, _ar1=ar1)
@@ -443,7 +541,7 @@ def select_model(
             model, report = white, white_report
         else:
             report.warnings.append(_ar1_note(rho, report, white.n_terms, "kept"))
-    return _finished(model, report)
+    return model, report
 
 
 def _finished(
@@ -751,17 +849,18 @@ def _select_model(
         report.warnings = [w for w in report.warnings if not w.startswith(stale)]
     if not np.any(xi):  # the least sparse fit may still tell inputs logged out of time
         w0 = min(pilots)
-        hint = input_shift_note(used, names, w0, pilots[w0],
-                                long_run_ratio(used, names, pilots[w0], w0))  # fmt: skip
-        raise ValueError(_empty_model_message(candidates, report.hold)
-                         + (f"; the least sparse fit says: {hint}" if hint else ""))  # fmt: skip
+        hint = input_timing(used, names, w0, pilots[w0],
+                            long_run_ratio(used, names, pilots[w0], w0))  # fmt: skip
+        said = f"; the least sparse fit says: {hint.note}" if hint else ""
+        raise NoModelError(_empty_model_message(candidates, report.hold) + said, hint)
     # An input in a kinematic relation is the sign of inputs that changed within the step;
     # whole-row shifts fit such logs a little better and worse predict (a trial: 30 % -> 35 %
     # at 1 s with the shift advised), so the input-shift note is not given beside it.
     # (a first-order lag of the actuators puts inputs there too, and is still named)
     driven = kinematic_input_note(used, names, xi)
-    shifted = input_shift_note(used, names, best.window, xi, ratio,
-                               shifts=() if driven else INPUT_SHIFTS)  # fmt: skip
+    report.timing = input_timing(used, names, best.window, xi, ratio,
+                                 shifts=() if driven else INPUT_SHIFTS)  # fmt: skip
+    shifted = report.timing.note if report.timing else None
     shifted = shifted or state_shift_note(used, names, best.window, xi, ratio)
     shifted = shifted or angle_offset_note(xi, names, first.state_names)
     for note in (shifted, driven):  # before the notes they cause (outlying steps, misfit)
@@ -814,7 +913,7 @@ def _select_model(
         **final_cfg.label,
         "n_trajectories": len(trajs),
         **({"measured_inputs": list(trajs[0].measured)} if trajs[0].measured else {}),
-        **({"input_lag": lag} if (lag := input_lag(trajs)) else {}),
+        **({"input_lag": lag} if (lag := input_lag_of(trajs)) else {}),
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "ranges": data_ranges(trajs),

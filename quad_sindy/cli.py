@@ -7,7 +7,6 @@ Outputs are checked for writability before any long computation starts.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import re
@@ -55,27 +54,30 @@ def _shifted(trajs: list, rows: int) -> tuple[list, str]:
 
 def _lagged(trajs: list, tau: float) -> tuple[list, str]:
     """The segments with their held inputs lagged ``tau`` s, and what was lagged (one line)."""
-    if not (math.isfinite(tau) and tau >= 0):
-        _fail(f"--input-lag is a time constant >= 0 [s], got {tau:g}")
-    held = [n for n in trajs[0].input_names if n not in trajs[0].measured]
-    if not held:
-        _fail("--input-lag lags commands held over each step, and the data have none (every "
-              "input is --measured or there are no inputs)")  # fmt: skip
-    from identification.data import LAG_SETTLE
+    from identification.data import LAG_SETTLE, lag_segments
 
-    kept = []
-    for t in trajs:
-        with contextlib.suppress(ValueError):  # (too short to settle: counted below)
-            kept.append(t.lag_inputs(tau))
-    if not kept:
-        _fail(f"every segment (the longest {max(t.t[-1] - t.t[0] for t in trajs):g} s) is too "
-              f"short for actuators of a {tau:g} s lag to settle ({LAG_SETTLE:g} time "
-              "constants)")  # fmt: skip
-    short = len(trajs) - len(kept)
+    try:
+        kept, short = lag_segments(trajs, tau)
+    except ValueError as exc:
+        _fail(f"--input-lag: {exc}")
+    held = [n for n in trajs[0].input_names if n not in trajs[0].measured]
     short_note = f"; {short} segment(s) too short for it left out" if short else ""
     return kept, (f"{', '.join(held)} acting through a first-order lag of {tau:g} s "
                   f"(--input-lag; each segment's first {LAG_SETTLE * tau:g} s left out, while "
                   f"the actuators' start settles){short_note}")  # fmt: skip
+
+
+def _lag_option(text: str) -> float | None:
+    """``--input-lag``: None for auto, else the time constant [s] (refused in one line)."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        _fail(f"--input-lag is 'auto' or a time constant >= 0 in seconds, got {text!r}")
+    return value
 
 
 def _names(text: str | None) -> list[str] | None:
@@ -594,13 +596,15 @@ def identify(
         ),
     ] = 0,
     input_lag: Annotated[
-        float,
+        str,
         typer.Option(
-            help="time constant [s] of a first-order lag the held inputs act through (the "
-            "actuators of a log of commands; each step's mean of the lagged command is fitted)",
-            metavar="SECONDS",
+            help="time constant [s] of a first-order lag the held inputs act through (motors "
+            "that lag the commands logged; 0: they act as logged); auto: as logged, and where "
+            "the model's terms fit a lag of the inputs better, selected again with it and kept "
+            "if it predicts the held-out data at least as well",
+            metavar="auto|SECONDS",
         ),
-    ] = 0.0,
+    ] = "auto",
     plot: Annotated[
         Path | None,
         typer.Option(help="selection plot (default: OUT.png)", parser=_file_name, metavar="FILE"),
@@ -715,10 +719,11 @@ def identify(
             typer.echo(f"data: inputs taken {abs(input_shift)} row(s) "
                        f"{'later' if input_shift > 0 else 'earlier'} (--input-shift)"
                        + dropped)  # fmt: skip
-        if input_lag:
+        lag_value = _lag_option(input_lag)
+        if lag_value:
             if method == "paper":
                 _fail("the paper's method has no input lag: leave out --input-lag")
-            trajs, lagged = _lagged(trajs, input_lag)
+            trajs, lagged = _lagged(trajs, lag_value)
             first = trajs[0]
             typer.echo(f"data: {lagged}")
         if method == "paper":
@@ -784,6 +789,7 @@ def identify(
                 model, report = select_model(
                     trajs, lib, config=config, windows=windows, system=label, progress=True,
                     drop_outliers=drop_outliers, prewhiten=prewhiten,
+                    input_lag=0.0 if lag_value == 0 else None,  # (a lag given: the data's)
                 )  # fmt: skip
                 noted = ()  # printed with the report
                 best = report.best

@@ -647,21 +647,26 @@ def test_an_angle_logged_with_an_offset_is_named_with_it(other_clean):
     assert not any("shifted by" in w for w in report.warnings)
 
 
-def test_commands_of_lagging_actuators_are_named_and_input_lag_fits_them(tmp_path, other_clean):
+def test_commands_of_lagging_actuators_are_named_and_fitted_with_their_lag(tmp_path, other_clean):
     """Motors follow their commands through a first-order lag and only the commands are
     logged: the fit made up terms or was refused, and the notes named a shift of whole rows
-    at best. The lag is named with its time constant, here in the refusal (our own
-    simulator, not the envs'), and
-    ``--input-lag`` gives the exact model, which ``score`` applies to held-out logs."""
+    at best. The lag is named with its time constant (our own simulator, not the envs'),
+    and the selection runs again with it: the exact model, which ``score`` and
+    ``simulate`` apply to the commands of held-out logs."""
     import re
 
     from identification.experiments.synthetic import gusty_planar_flights
 
     flights = gusty_planar_flights(OTHER_PLANAR, 0.0, seed=5, steps=900, lag=0.04)
     with pytest.raises(ValueError, match="the identified model has no term") as refused:
-        select_model(flights, planar_library(), **FAST)  # the refusal names the lag
+        select_model(flights, planar_library(), **FAST, input_lag=0)  # as logged: refused
     named = re.search(r"first-order lag of .* --input-lag ([0-9.]+)", str(refused.value))
     assert named and abs(float(named.group(1)) - 0.04) < 0.004, refused.value
+    model, report = select_model(flights, planar_library(), **FAST)  # by default: fitted
+    assert report.warnings[0].startswith("the inputs act through a first-order lag of 0.04 s")
+    check = check_support(model, truth_planar(OTHER_PLANAR))
+    assert check.exact_support and check.max_rel_error < 1e-5, (check, report.warnings)
+    assert abs(model.meta["input_lag"] - 0.04) < 0.004
     paths = [str(write_trajectory_csv(tmp_path / f"c{i}.csv", t)) for i, t in enumerate(flights)]
     out = tmp_path / "m.json"
     run = CliRunner().invoke(app, ["identify", *paths, "--input-lag", "0.04", "--out", str(out)])
@@ -677,7 +682,7 @@ def test_commands_of_lagging_actuators_are_named_and_input_lag_fits_them(tmp_pat
     assert "as in training" in shown.output and max(errors) < 0.05, shown.output
     unlagged = CliRunner().invoke(app, ["score", str(out), path, "--input-lag", "0"])
     assert max(float(e) for e in re.findall(r": ([0-9.]+)% \(", unlagged.output)) > 1.0
-    # a lag given to data whose inputs act at once is named too
+    # a lag given to data whose inputs act at once is named; by default none is fitted
     paths = [
         str(write_trajectory_csv(tmp_path / f"a{i}.csv", t)) for i, t in enumerate(other_clean)
     ]
@@ -685,3 +690,5 @@ def test_commands_of_lagging_actuators_are_named_and_input_lag_fits_them(tmp_pat
     assert "without the lag of 0.03 s" in wrong.output, wrong.output
     _, report = select_model(other_clean, planar_library(), **FAST)
     assert not any("first-order lag" in w for w in report.warnings), report.warnings
+    bad = CliRunner().invoke(app, ["identify", *paths, "--input-lag", "-1", "--out", str(out)])
+    assert bad.exit_code != 0 and "--input-lag is 'auto' or a time constant" in bad.output
