@@ -392,10 +392,11 @@ def _disagreeing(
 
 
 INPUT_SHIFTS = (-3, -2, -1, 1, 2, 3)
-"""Shifts of the inputs [rows] that :func:`input_shift_note` tries."""
+"""Shifts of the inputs [rows] that :func:`input_timing` tries."""
 
-INPUT_LAGS = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0)
-"""First-order lags of the held inputs [median steps] that :func:`input_shift_note` tries."""
+INPUT_LAGS = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0)
+"""First-order lags of the held inputs [median steps] that :func:`input_timing` tries (to
+0.16 s at 100 Hz: a Crazyflie's motors take about 0.07 s)."""
 
 SHIFT_GAIN = 0.9
 """A shift is named only where it leaves at most this share of an equation's residual."""

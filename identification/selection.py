@@ -233,6 +233,7 @@ class SelectionReport:
         ar1: The coefficient the rows were prewhitened with (0: not prewhitened).
         timing: The shift or lag of the inputs the timing check named on the model
             (:func:`~identification.diagnostics.input_timing`; None: none).
+        prewhitened_timing: The same on the prewhitened selection's model, where one ran.
     """
 
     candidates: list[Candidate]
@@ -246,6 +247,7 @@ class SelectionReport:
     error_ar1: float | None = None
     ar1: float = 0.0
     timing: InputTiming | None = None
+    prewhitened_timing: InputTiming | None = None
 
     @property
     def best(self) -> Candidate:
@@ -446,6 +448,20 @@ def select_model(
                     horizon=horizon, n_models=n_models, seed=seed, system=system,
                     progress=progress, drop_outliers=drop_outliers)  # fmt: skip
     auto = input_lag is None and not input_lag_of(trajs)
+    return _finished(*_select_timed(trajs, library, settings, prewhiten, auto))
+
+
+def _select_timed(
+    trajs: list[Trajectory], library: Sequence[str], settings: dict, prewhiten: bool | None,
+    auto: bool,
+) -> tuple[IdentifiedModel, SelectionReport]:  # fmt: skip
+    """The selection as logged, or with the lag of the inputs its timing check names.
+
+    With ``auto``, a lag named on the plain model, on the prewhitened one or (where no model
+    predicts better than holding the state) on the least sparse fit is fitted: the
+    selection runs again on the lagged inputs and is kept where it predicts its held-out
+    data at least as well, as a share of holding the state.
+    """
     try:
         plain = _select_model(trajs, library, **settings)
     except NoModelError as refusal:
@@ -459,31 +475,37 @@ def select_model(
             raise refusal from None
         report.warnings.insert(0, _lag_note(lag, "no model of the inputs as logged predicted "
                                                  "better than holding the state"))  # fmt: skip
-        return _finished(model, report)
+        return model, report
     lag = _named_lag(plain[1].timing) if auto else None
-    if lag is None:
-        return _finished(*_select_prewhitened(trajs, library, settings, prewhiten, plain))
+    kept = None  # the selection as logged, prewhitened where it calls for it
+    if lag is None:  # a prewhitened selection's model may still name a lag (gusts beside it)
+        kept = _select_prewhitened(trajs, library, settings, prewhiten, plain)
+        lag = _named_lag(kept[1].prewhitened_timing) if auto else None
+        if lag is None:
+            return kept
+
+    def as_logged(note: str) -> tuple[IdentifiedModel, SelectionReport]:
+        model, report = kept or _select_prewhitened(trajs, library, settings, prewhiten, plain)
+        report.warnings.append(note)
+        return model, report
+
     try:
         model, report = _select_prewhitened(lag_segments(trajs, lag)[0], library, settings,
                                             prewhiten)  # fmt: skip
     except ValueError as exc:
-        model, report = _select_prewhitened(trajs, library, settings, prewhiten, plain)
-        report.warnings.append(f"the timing check named a first-order lag of the inputs of "
-                               f"{lag:.2g} s, and the selection with it failed ({exc}): the "
-                               "inputs are kept as logged")  # fmt: skip
-        return _finished(model, report)
-    ours, theirs = _relative_score(report), _relative_score(plain[1])
+        return as_logged(f"the timing check named a first-order lag of the inputs of {lag:.2g} "
+                         f"s, and the selection with it failed ({exc}): the inputs are kept "
+                         "as logged")  # fmt: skip
+    logged = kept or plain
+    ours, theirs = _relative_score(report), _relative_score(logged[1])
     if ours > theirs:  # a lag that predicts the held-out parts worse is not the vehicle's
-        model, report = _select_prewhitened(trajs, library, settings, prewhiten, plain)
-        report.warnings.append(
-            f"the timing check named a first-order lag of the inputs of {lag:.2g} s, but the "
-            f"model selected with it predicts its held-out data worse ({ours:.3g} of holding "
-            f"the state, against {theirs:.3g}): the inputs are kept as logged"
-        )
-        return _finished(model, report)
-    why = f"the model of the inputs as logged had {plain[0].n_terms} terms, score {theirs:.3g}"
+        return as_logged(f"the timing check named a first-order lag of the inputs of {lag:.2g} "
+                         f"s, but the model selected with it predicts its held-out data worse "
+                         f"({ours:.3g} of holding the state, against {theirs:.3g}): the inputs "
+                         "are kept as logged")  # fmt: skip
+    why = f"the model of the inputs as logged had {logged[0].n_terms} terms, score {theirs:.3g}"
     report.warnings.insert(0, _lag_note(lag, f"{why} of holding the state; with it {ours:.3g}"))
-    return _finished(model, report)
+    return model, report
 
 
 def _relative_score(report: SelectionReport) -> float:
@@ -535,6 +557,7 @@ def _select_prewhitened(
     except ValueError as exc:
         report.warnings.append(_ar1_note(rho, report, None, f"it failed: {exc}"))
     else:
+        report.prewhitened_timing = white_report.prewhitened_timing = white_report.timing
         if prewhiten or white.n_terms <= model.n_terms + AR1_EXTRA_TERMS:
             white_report.error_ar1 = rho
             white_report.warnings.append(_ar1_note(rho, report, white.n_terms, None))

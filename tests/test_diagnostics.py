@@ -692,3 +692,9 @@ def test_commands_of_lagging_actuators_are_named_and_fitted_with_their_lag(tmp_p
     assert not any("first-order lag" in w for w in report.warnings), report.warnings
     bad = CliRunner().invoke(app, ["identify", *paths, "--input-lag", "-1", "--out", str(out)])
     assert bad.exit_code != 0 and "--input-lag is 'auto' or a time constant" in bad.output
+    # beside gusts the plain fit does not name it, the prewhitened one does: fitted too
+    gusty = gusty_planar_flights(OTHER_PLANAR, 0.03, seed=11, lag=0.03)
+    model, report = select_model(gusty, planar_library(), **FAST)
+    check = check_support(model, truth_planar(OTHER_PLANAR))
+    assert model.meta.get("input_lag") == 0.03 and check.exact_support, report.warnings
+    assert check.max_rel_error < 0.02 and model.meta["selection"]["prewhitened_ar1"] > 0.5
