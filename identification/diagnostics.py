@@ -625,7 +625,11 @@ def _own_terms_refit(xi: np.ndarray, names: Sequence[str], window: int, rows: Se
     def residuals(part: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
         g = Gram.stack(grams(part, sub, "rk4", window, xs))
         pairs = [residual_variance(g, i, supports[i]) for i in rows]
-        rss, sigma2 = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+        sigma2 = np.array([p[1] for p in pairs])
+        # the whole residual (the variance's numerator): the RSS within the columns' range
+        # alone is near zero where one equation holds nearly all of them (a real log's
+        # vz' on its 12 terms: 1e-9 against a variance of 0.3, and no shift could pass)
+        rss = sigma2 * np.array([max(max(g.rows, 2.0) - len(supports[i]), 1.0) for i in rows])
         # residuals under round-off of the targets are no residuals: a shift that changes
         # them is no gain (a recheck trial's exact model named "w taken 1 row earlier")
         floor = (ROUNDOFF_SHARE * g.y_norms[list(rows)]) ** 2

@@ -698,3 +698,27 @@ def test_commands_of_lagging_actuators_are_named_and_fitted_with_their_lag(tmp_p
     check = check_support(model, truth_planar(OTHER_PLANAR))
     assert model.meta.get("input_lag") == 0.03 and check.exact_support, report.warnings
     assert check.max_rel_error < 0.02 and model.meta["selection"]["prewhitened_ar1"] > 0.5
+
+
+def test_the_timing_check_reads_the_whole_residual_where_one_equation_holds_every_term():
+    """The shift and lag checks compared the residual within the range of the model's
+    columns, near zero where one equation holds them all (a real Crazyflie log's `vz'` on
+    its 12 terms): no shift could pass. ``v' = -0.5 v + 2 u`` logged two rows late is named,
+    and the aligned log is not."""
+    from identification.diagnostics import input_timing
+
+    rng = np.random.default_rng(2)
+    n = 3000
+    t = np.arange(n) * 0.01
+    u = np.repeat(rng.normal(size=n // 10), 10)
+    v = np.zeros(n)
+    decay = np.exp(-0.5 * 0.01)
+    for k in range(n - 1):  # exact for the held input
+        v[k + 1] = decay * v[k] + (1 - decay) * 4 * u[k]
+    v += 1e-4 * rng.normal(size=n)
+    late = Trajectory(t[2:], v[2:, None], u[:-2, None], ("v",), ("u",))
+    xi = np.array([[-0.5, 2.0]])
+    found = input_timing([late], ["v", "u"], 1, xi, np.ones(1))
+    assert found is not None and (found.kind, found.value) == ("shift", 2.0), found
+    aligned = Trajectory(t, v[:, None], u[:, None], ("v",), ("u",))
+    assert input_timing([aligned], ["v", "u"], 1, xi, np.ones(1)) is None
