@@ -601,7 +601,7 @@ def identify(
             help="time constant [s] of a first-order lag the held inputs act through (motors "
             "that lag the commands logged; 0: they act as logged); auto: as logged, and where "
             "the model's terms fit a lag of the inputs better, selected again with it and kept "
-            "if it predicts the held-out data at least as well",
+            "if it predicts the held-out data at least as well (with a fixed --lambda: named)",
             metavar="auto|SECONDS",
         ),
     ] = "auto",
@@ -639,6 +639,7 @@ def identify(
         _fail("--library is empty: leave it out for the default, or give a preset or spec")
     # (a scaled threshold: 1 already leaves out a term that explains the whole target)
     lam_value = _number_option("--lambda", lam, float, 0.0, 1e3) if lam != "auto" else None
+    lag_value = _lag_option(input_lag)
     window_value = _number_option("--window", window, int, low=1) if window != "auto" else None
     _writable_file(out, data)  # before the selection, which may take a minute
     if lam_value is None and method != "paper":
@@ -719,7 +720,6 @@ def identify(
             typer.echo(f"data: inputs taken {abs(input_shift)} row(s) "
                        f"{'later' if input_shift > 0 else 'earlier'} (--input-shift)"
                        + dropped)  # fmt: skip
-        lag_value = _lag_option(input_lag)
         if lag_value:
             if method == "paper":
                 _fail("the paper's method has no input lag: leave out --input-lag")
