@@ -1051,6 +1051,11 @@ def show(
         _fail(str(exc))
     typer.echo("\n".join(loaded.equations(precision=precision, latex=latex)))
     note = "% " if latex else ""
+    lag = loaded.meta.get("input_lag", 0.0)
+    if lag:  # the model's inputs are actuators' outputs: it is given commands
+        held = [n for n in loaded.input_names if n not in loaded.meta.get("measured_inputs", ())]
+        typer.echo(f"{note}inputs: {', '.join(held)} act through a first-order lag of {lag:g} s "
+                   "(the model takes their commands; simulate and score lag them)")  # fmt: skip
     sel = loaded.meta.get("selection")
     chosen = sel.get("chosen") if isinstance(sel, dict) else None
     try:

@@ -675,6 +675,8 @@ def test_commands_of_lagging_actuators_are_named_and_fitted_with_their_lag(tmp_p
     check = check_support(model, truth_planar(OTHER_PLANAR))
     assert check.exact_support and check.max_rel_error < 1e-5, (check, run.output)
     assert model.meta["input_lag"] == 0.04 and "fit the data better" not in run.output
+    described = CliRunner().invoke(app, ["show", str(out)]).output
+    assert "u1, u2 act through a first-order lag of 0.04 s (the model takes" in described
     held = gusty_planar_flights(OTHER_PLANAR, 0.0, seed=6, flights=1, steps=600, lag=0.04)
     path = str(write_trajectory_csv(tmp_path / "held.csv", held[0]))
     shown = CliRunner().invoke(app, ["score", str(out), path])
