@@ -76,6 +76,8 @@ class FlightSpec:
         excitation: Random input noise, as a fraction of hover thrust (moments scaled alike).
         drag: Linear drag coefficient c [N s/m] (0: none).
         seed: Random seed.
+        lag: Time constant [s] of a first-order lag the actuators follow the (saturated)
+            commands through, integrated with the states; the commands are logged (0: none).
     """
 
     flights: int = 3
@@ -87,6 +89,7 @@ class FlightSpec:
     excitation: float = 0.05
     drag: float = 0.0
     seed: int = 0
+    lag: float = 0.0
 
     def __post_init__(self) -> None:
         if self.integrator not in INTEGRATORS:
@@ -101,6 +104,8 @@ class FlightSpec:
                 and self.drag >= 0):  # fmt: skip
             raise ValueError(f"excitation and drag must be finite and non-negative, got "
                              f"{self.excitation} and {self.drag}")  # fmt: skip
+        if not (np.isfinite(self.lag) and self.lag >= 0):
+            raise ValueError(f"lag must be finite and non-negative, got {self.lag}")
 
 
 def _step(
@@ -185,14 +190,22 @@ def _fly(
     noise: np.ndarray,
     spec: FlightSpec,
 ) -> tuple[np.ndarray, np.ndarray]:
-    n = spec.steps
-    states = np.empty((n, x0.size))
+    n, size = spec.steps, x0.size
+    states = np.empty((n, size))
     applied = np.empty((n, noise.shape[1]))
     x = x0
+    if spec.lag > 0:  # the actuators' outputs as states: a' = (c - a) / lag, c held
+        plant = rhs
+
+        def rhs(z: np.ndarray, c: np.ndarray) -> np.ndarray:
+            return np.concatenate([plant(z[:size], z[size:]), (c - z[size:]) / spec.lag])
+
     for k in range(n):
-        states[k] = x
-        command = controller(x, refs[k]) if controller is not None else open_u[k]
+        states[k] = x[:size]
+        command = controller(x[:size], refs[k]) if controller is not None else open_u[k]
         applied[k] = saturate(command + noise[k])
+        if spec.lag > 0 and k == 0:  # the actuators start at the first command
+            x = np.concatenate([x, applied[0]])
         x = _step(rhs, x, applied[k], spec.dt, spec.integrator)
     return states, applied
 
