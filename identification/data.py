@@ -69,8 +69,8 @@ class Trajectory:
             interpolate them (:meth:`stage_inputs`). Held, a tilt that changes within the
             step left terms of about g dt / 2 in the fit.
         commands: The logged commands of held inputs that act through a first-order lag
-            (:meth:`lag_inputs`), shape (N, m); ``u`` then holds each step's mean of the
-            lagged inputs. None for inputs that act as logged.
+            (:meth:`lag_inputs`), shape (N, m); ``u`` then holds the actuators' output at
+            each row. None for inputs that act as logged.
     """
 
     t: np.ndarray
