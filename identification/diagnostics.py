@@ -440,20 +440,6 @@ class InputTiming:
     value: float
 
 
-def input_shift_note(
-    trajs: Sequence[Trajectory],
-    names: list[str],
-    window: int,
-    xi: np.ndarray,
-    ratio: np.ndarray,
-    command: str = "identify again",
-    shifts: Sequence[int] = INPUT_SHIFTS,
-) -> str | None:
-    """:func:`input_timing`'s note (None where the inputs fit best as they are)."""
-    found = input_timing(trajs, names, window, xi, ratio, command, shifts)
-    return None if found is None else found.note
-
-
 def input_timing(
     trajs: Sequence[Trajectory],
     names: list[str],

@@ -620,7 +620,7 @@ def identify(
     from identification.data import PRESET_ANGLES, load_data
     from identification.diagnostics import (
         data_warnings,
-        input_shift_note,
+        input_timing,
         stamp_jitter,
         state_shift_note,
     )
@@ -834,10 +834,11 @@ def identify(
                     ratio = long_run_ratio(
                         long_enough(trajs, config.window), names, xi, config.window
                     )
+                    timing = input_timing(trajs, names, config.window, xi, ratio)
                     notes.append(
-                        input_shift_note(trajs, names, config.window, xi, ratio)
-                        or state_shift_note(trajs, names, config.window, xi, ratio)
-                    )
+                        timing.note if timing
+                        else state_shift_note(trajs, names, config.window, xi, ratio)
+                    )  # fmt: skip
                 for note in filter(None, notes):
                     typer.echo(f"warning: {note}")
     except (ValueError, FileNotFoundError) as exc:
@@ -906,7 +907,7 @@ def score(
     from identification.data import load_data
     from identification.diagnostics import (
         data_warnings,
-        input_shift_note,
+        input_timing,
         range_note,
         stamp_jitter,
         state_shift_note,
@@ -980,9 +981,10 @@ def score(
     # (the notes read the model's window; a log shorter than it gets the longest that fits)
     names, window = list(loaded.feature_names), max(min(window, max(map(len, trajs)) - 1), 1)
     ratio = long_run_ratio(long_enough(trajs, window), names, loaded.coefficients, window)
-    late = input_shift_note(trajs, names, window, loaded.coefficients, ratio,
-                            command="score again")  # fmt: skip
-    late = late or state_shift_note(trajs, names, window, loaded.coefficients, ratio)
+    timing = input_timing(trajs, names, window, loaded.coefficients, ratio,
+                          command="score again")  # fmt: skip
+    late = timing.note if timing else state_shift_note(trajs, names, window,
+                                                       loaded.coefficients, ratio)  # fmt: skip
     for note in [*data_warnings(trajs, loaded.feature_names), range_note(loaded, trajs), late]:
         if note:
             typer.echo(f"warning: {note}")

@@ -411,7 +411,7 @@ def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inpu
     input-shift check stays quiet: `score` named an input shift on such a model that only
     one equation gained by and the others lost far more (following it made the score 30
     times worse)."""
-    from identification.diagnostics import input_shift_note, state_shift_note
+    from identification.diagnostics import input_timing, state_shift_note
     from identification.support import long_run_ratio
 
     lagged = []
@@ -429,7 +429,7 @@ def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inpu
     # an input shift that helps one equation but costs others more is not named
     names, xi, w = list(model.feature_names), model.coefficients, model.meta["window"]
     ratio = long_run_ratio(lagged, names, xi, w)
-    assert input_shift_note(lagged, names, w, xi, ratio) is None
+    assert input_timing(lagged, names, w, xi, ratio) is None
     assert "y_dot taken 2 row(s) later" in state_shift_note(lagged, names, w, xi, ratio)
     # more data than the checks refit on (SHIFT_ROWS): blocks spread over every log, the
     # same lag named
