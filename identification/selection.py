@@ -524,7 +524,8 @@ def _lag_note(lag: float, why: str) -> str:
         f"the inputs act through a first-order lag of {lag:.2g} s (the actuators lag their "
         f"commands): the timing check named it and the model was selected with it ({why}; "
         "--input-lag 0 or input_lag=0 keeps the inputs as logged). Where the states are "
-        "instead filtered estimates that lag the inputs, no lag undoes the filter"
+        "instead filtered estimates that lag the inputs, the lag stands in for the filter: "
+        "the model then predicts logs filtered alike, not the vehicle's own states"
     )
 
 

@@ -739,3 +739,16 @@ def test_six_dof_commands_of_motors_that_lag_are_fitted_with_their_lag():
     check = check_support(model, truth_quad6dof(OTHER_6DOF))
     assert model.meta["input_lag"] == 0.03, report.warnings
     assert not check.missed and check.max_rel_error < 1e-4 and len(check.spurious) <= 2, check
+
+
+def test_a_lag_longer_than_the_grid_is_followed_past_its_end():
+    """A lag of 25 sample steps (0.1 s at 250 Hz) was named at the grid's end, 16 steps
+    (0.064 s), and the model fitted with it was 24 % off; the longer lags are tried where the
+    grid's longest fits best."""
+    from identification.experiments.synthetic import gusty_planar_flights
+
+    flights = gusty_planar_flights(OTHER_PLANAR, 0.0, seed=5, steps=2500, dt=0.004, lag=0.1)
+    model, report = select_model(flights, planar_library(), **FAST)
+    check = check_support(model, truth_planar(OTHER_PLANAR))
+    assert model.meta["input_lag"] == 0.1, report.warnings
+    assert not check.missed and check.max_rel_error < 1e-4, check
