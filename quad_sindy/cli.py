@@ -888,11 +888,11 @@ def score(
         ),
     ] = None,
     input_lag: Annotated[
-        float | None,
+        str | None,
         typer.Option(
-            help="first-order lag [s] of the held inputs (default: the model's own "
-            "--input-lag from identify)",
-            metavar="SECONDS",
+            help="first-order lag [s] of the held inputs (default, or auto: the model's own, "
+            "from identify)",
+            metavar="auto|SECONDS",
             show_default=False,
         ),
     ] = None,
@@ -951,10 +951,11 @@ def score(
             when = "later" if shift > 0 else "earlier"
             source = "as in training" if input_shift is None else "as --input-shift asks"
             typer.echo(f"data: inputs taken {abs(shift)} row(s) {when}, {source}{dropped}")
-        lag = loaded.meta.get("input_lag", 0.0) if input_lag is None else input_lag
+        given = None if input_lag is None else _lag_option(input_lag)  # (auto: None)
+        lag = loaded.meta.get("input_lag", 0.0) if given is None else given
         if lag:  # the actuators' lag the model was identified with
             trajs, lagged = _lagged(trajs, float(lag))
-            source = "as in training" if input_lag is None else "as --input-lag asks"
+            source = "as in training" if given is None else "as --input-lag asks"
             typer.echo(f"data: {lagged}, {source}")
         periods = sorted(t.dt for t in trajs)
         if periods[-1] > 1.01 * periods[0]:  # one horizon in steps must be one in seconds

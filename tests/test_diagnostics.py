@@ -682,6 +682,8 @@ def test_commands_of_lagging_actuators_are_named_and_fitted_with_their_lag(tmp_p
     shown = CliRunner().invoke(app, ["score", str(out), path])
     errors = [float(e) for e in re.findall(r": ([0-9.]+)% \(", shown.output)]
     assert "as in training" in shown.output and max(errors) < 0.05, shown.output
+    again = CliRunner().invoke(app, ["score", str(out), path, "--input-lag", "auto"])
+    assert "as in training" in again.output, again.output
     unlagged = CliRunner().invoke(app, ["score", str(out), path, "--input-lag", "0"])
     assert max(float(e) for e in re.findall(r": ([0-9.]+)% \(", unlagged.output)) > 1.0
     # a lag given to data whose inputs act at once is named; by default none is fitted
