@@ -180,6 +180,18 @@ def _sines(rng: np.random.Generator, t: np.ndarray, count: int) -> np.ndarray:
     return np.sin(np.outer(t, freqs) + phases).sum(axis=1) / count
 
 
+def _actuated(plant: Callable, size: int, lag: float) -> Callable:
+    """``plant(x, a)`` with the actuators' outputs ``a`` as states after its ``size`` ones.
+
+    They follow the held command ``c`` as ``a' = (c - a) / lag``.
+    """
+
+    def rhs(z: np.ndarray, c: np.ndarray) -> np.ndarray:
+        return np.concatenate([plant(z[:size], z[size:]), (c - z[size:]) / lag])
+
+    return rhs
+
+
 def _fly(
     rhs: Callable,
     saturate: Callable,
@@ -194,12 +206,8 @@ def _fly(
     states = np.empty((n, size))
     applied = np.empty((n, noise.shape[1]))
     x = x0
-    if spec.lag > 0:  # the actuators' outputs as states: a' = (c - a) / lag, c held
-        plant = rhs
-
-        def rhs(z: np.ndarray, c: np.ndarray) -> np.ndarray:
-            return np.concatenate([plant(z[:size], z[size:]), (c - z[size:]) / spec.lag])
-
+    if spec.lag > 0:
+        rhs = _actuated(rhs, size, spec.lag)
     for k in range(n):
         states[k] = x[:size]
         command = controller(x[:size], refs[k]) if controller is not None else open_u[k]
@@ -363,7 +371,7 @@ def gusty_planar_flights(
     out = []
     for _ in range(flights):
         x, force, dither = np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0]), np.zeros(3), np.zeros(2)
-        act = np.array([m * g, 0.0])  # the actuators' output (the command where no lag)
+        act = np.array([m * g, 0.0])  # the actuators' output (with a lag)
         goals = rng.uniform([-1.5, 0.5], [1.5, 2.5], size=(6, 2))
         states, inputs = np.empty((steps, 6)), np.empty((steps, 2))
         for k in range(steps):
@@ -376,23 +384,20 @@ def gusty_planar_flights(
             states[k], inputs[k] = x, u
             h = dt / 5
             for _ in range(5):
-                a = np.exp(-h / GUST_TAU)
+                decay = np.exp(-h / GUST_TAU)
                 kick = gust * m * g * rng.normal(size=3) * [1.0, 1.0, 0.02]
-                force = a * force + np.sqrt(1 - a * a) * kick
+                force = decay * force + np.sqrt(1 - decay * decay) * kick
 
-                def f(s: np.ndarray, d: np.ndarray = force, u: np.ndarray = u) -> np.ndarray:
-                    thrust, moment = s[6:] if lag > 0 else u
-                    rates = (u - s[6:]) / lag if lag > 0 else np.zeros(2)
-                    return np.array([s[3], s[4], s[5], (d[0] - thrust * np.sin(s[2])) / m,
-                                     (thrust * np.cos(s[2]) - m * g + d[1]) / m,
-                                     (moment + d[2]) / ixx, *rates])  # fmt: skip
+                def plant(s: np.ndarray, a: np.ndarray, d: np.ndarray = force) -> np.ndarray:
+                    return np.array([s[3], s[4], s[5], (d[0] - a[0] * np.sin(s[2])) / m,
+                                     (a[0] * np.cos(s[2]) - m * g + d[1]) / m,
+                                     (a[1] + d[2]) / ixx])  # fmt: skip
 
-                s0 = np.concatenate([x, act])
-                k1 = f(s0)
-                k2 = f(s0 + h / 2 * k1)
-                k3 = f(s0 + h / 2 * k2)
-                s0 = s0 + h / 6 * (k1 + 2 * k2 + 2 * k3 + f(s0 + h * k3))
-                x, act = s0[:6], s0[6:]
+                if lag > 0:  # the actuators' outputs ride along as states
+                    both = rk4_step(_actuated(plant, 6, lag), np.concatenate([x, act]), u, h)
+                    x, act = both[:6], both[6:]
+                else:
+                    x = rk4_step(plant, x, u, h)
         t = np.arange(steps) * dt
         meta = {"gust": gust, "lag": lag}
         out.append(Trajectory(t, states, inputs, PLANAR_STATE_NAMES, PLANAR_INPUT_NAMES, meta=meta))
