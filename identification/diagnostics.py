@@ -650,6 +650,19 @@ def _own_terms_refit(xi: np.ndarray, names: Sequence[str], window: int, rows: Se
     return residuals
 
 
+def timing_note(
+    trajs: Sequence[Trajectory],
+    names: list[str],
+    window: int,
+    xi: np.ndarray,
+    ratio: np.ndarray,
+    command: str = "identify again",
+) -> str | None:
+    """:func:`input_timing`'s note, else :func:`state_shift_note`'s (a state column that lags)."""
+    timing = input_timing(trajs, names, window, xi, ratio, command)
+    return timing.note if timing else state_shift_note(trajs, names, window, xi, ratio)
+
+
 def _state_taken_later(tr: Trajectory, state: int, rows: int, margin: int) -> Trajectory:
     """``tr`` with state column ``state`` taken ``rows`` rows later, ``margin`` rows cut."""
     part = tr.slice(margin, len(tr) - margin)

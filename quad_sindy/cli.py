@@ -620,9 +620,8 @@ def identify(
     from identification.data import PRESET_ANGLES, load_data
     from identification.diagnostics import (
         data_warnings,
-        input_timing,
         stamp_jitter,
-        state_shift_note,
+        timing_note,
     )
     from identification.features import parse_term
     from identification.fit import FitConfig, fit
@@ -834,11 +833,7 @@ def identify(
                     ratio = long_run_ratio(
                         long_enough(trajs, config.window), names, xi, config.window
                     )
-                    timing = input_timing(trajs, names, config.window, xi, ratio)
-                    notes.append(
-                        timing.note if timing
-                        else state_shift_note(trajs, names, config.window, xi, ratio)
-                    )  # fmt: skip
+                    notes.append(timing_note(trajs, names, config.window, xi, ratio))
                 for note in filter(None, notes):
                     typer.echo(f"warning: {note}")
     except (ValueError, FileNotFoundError) as exc:
@@ -907,10 +902,9 @@ def score(
     from identification.data import load_data
     from identification.diagnostics import (
         data_warnings,
-        input_timing,
         range_note,
         stamp_jitter,
-        state_shift_note,
+        timing_note,
         trig_variables,
     )
     from identification.model import load_model
@@ -982,10 +976,7 @@ def score(
     # (the notes read the model's window; a log shorter than it gets the longest that fits)
     names, window = list(loaded.feature_names), max(min(window, max(map(len, trajs)) - 1), 1)
     ratio = long_run_ratio(long_enough(trajs, window), names, loaded.coefficients, window)
-    timing = input_timing(trajs, names, window, loaded.coefficients, ratio,
-                          command="score again")  # fmt: skip
-    late = timing.note if timing else state_shift_note(trajs, names, window,
-                                                       loaded.coefficients, ratio)  # fmt: skip
+    late = timing_note(trajs, names, window, loaded.coefficients, ratio, "score again")
     for note in [*data_warnings(trajs, loaded.feature_names), range_note(loaded, trajs), late]:
         if note:
             typer.echo(f"warning: {note}")
