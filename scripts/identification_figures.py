@@ -144,10 +144,19 @@ def main() -> None:
         help="instead: closed-loop flights in unmeasured gusts, plain fit against the default "
         "(prewhitened where the errors are correlated), over this many seeds",
     )
+    parser.add_argument(
+        "--lags",
+        action="store_true",
+        help="instead: closed-loop flights whose actuators lag their logged commands, fitted "
+        "as logged (--input-lag 0) and by default (the lag named and fitted)",
+    )
     args = parser.parse_args()
     config = FitConfig(optimizer=args.optimizer)
     if args.gusts:
         gusts(args.gusts, config)
+        return
+    if args.lags:
+        lags(config)
         return
     if args.many_logs:
         many_logs(config)
@@ -482,6 +491,48 @@ def gusts(seeds, config):
                 print(f"| {name} | {gust:g} | {seed} | {rho:.2f} | {cells[0]} | {cells[1]} |",
                       flush=True)  # fmt: skip
     print(f"default against plain at 1 s (10 % either way): {tally}")
+
+
+def lags(config):
+    """Actuators that lag their logged commands (:func:`gusty_planar_flights` with ``lag``,
+    its own simulator, no gusts): the fit of the inputs as logged against the default, on
+    two vehicles and three lags; the 1 s error is ``score``'s (the worst state's RMS share of
+    its range) on three held-out flights of the same vehicle, their commands lagged as the
+    model says."""
+    from identification.scoring import held_out_errors
+
+    vehicles = {
+        "m=0.45 kg, Ixx=3e-3": PlanarQuadParams(mass=0.45, Ixx=3e-3, arm_length=0.12,
+                                                rotor_force_max=9.0),
+        "m=1.4 kg, Ixx=1.5e-2": PlanarQuadParams(mass=1.4, Ixx=1.5e-2, arm_length=0.2,
+                                                 rotor_force_max=30.0),
+    }  # fmt: skip
+    print("| vehicle | lag [s] | as logged: terms, off, worst coef, 1 s | default: lag fitted, "
+          "terms, off, worst coef, 1 s |")  # fmt: skip
+    print("|---|---|---|---|")
+    for name, params in vehicles.items():
+        truth = truth_planar(params)
+        for lag in (0.02, 0.04, 0.08):
+            data = gusty_planar_flights(params, 0.0, seed=1, lag=lag)
+            held = gusty_planar_flights(params, 0.0, seed=999, lag=lag)
+            cells = []
+            for input_lag in (0.0, None):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", IdentificationWarning)
+                    try:
+                        model, _ = select_model(data, planar_library(), config=config,
+                                                input_lag=input_lag)  # fmt: skip
+                    except ValueError:
+                        cells.append("refused")
+                        continue
+                fitted = model.meta.get("input_lag", 0.0)
+                check = check_support(model, truth)
+                logs = [t.lag_inputs(fitted) for t in held] if fitted else held
+                error = max(held_out_errors(model, logs, 100).relative)
+                cells.append(("" if input_lag == 0 else f"{fitted:g} s, ")
+                             + f"{check.n_terms}, {check.off}, {check.max_rel_error:.1%}, "
+                             f"{error:.2%}")  # fmt: skip
+            print(f"| {name} | {lag:g} | {cells[0]} | {cells[1]} |", flush=True)
 
 
 def many_logs(config: FitConfig) -> None:
