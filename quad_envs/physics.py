@@ -203,6 +203,38 @@ class Effects:
         )
 
 
+# -- rotor dynamics around a field integrated in Python -------------------------------------
+
+
+@dataclass(frozen=True)
+class RotorLagField:
+    """A rigid-body field ``rhs(x, u)`` with rotor dynamics, for :func:`rk4_step`.
+
+    The state is extended by the rotor thrusts T (k, after the n rigid-body states) and the
+    input is the rotors' commands T_cmd: dx/dt = rhs(x, M T) and dT/dt = (T_cmd - T) / tau,
+    as the compiled kernels step it. A field whose inputs act through a first-order lag
+    (an identified model's) is stepped so: the lag is linear and the same for every rotor,
+    so lagging the rotor thrusts and mixing them equals lagging the mixed commands.
+
+    Attributes:
+        rhs: The rigid-body field, batched over leading axes.
+        mix: The mixer M (inputs x rotors).
+        n: Rigid-body states.
+        tau: Rotor time constant [s] (a number, or one per row of the batch as (b, 1)).
+    """
+
+    rhs: Callable[[FloatArray, FloatArray], FloatArray]
+    mix: FloatArray
+    n: int
+    tau: Any
+
+    def __call__(self, x: FloatArray, thrust_cmd: FloatArray) -> FloatArray:
+        """dx/dt of the extended state (..., n + k) under the rotor commands (..., k)."""
+        rotors = x[..., self.n :]
+        rigid = self.rhs(x[..., : self.n], rotors @ self.mix.T)
+        return np.concatenate([rigid, (thrust_cmd - rotors) / self.tau], axis=-1)
+
+
 # -- parameters as a vector ----------------------------------------------------------------
 
 EFFECT_FIELDS: tuple[str, ...] = (
@@ -678,8 +710,11 @@ def vehicle_kernels(vehicle: Any) -> Kernels:
 def point_rhs_kernels(vehicle: Any, point_source: str) -> Kernels:
     """Kernels stepping a generated ``point(X, U, out)`` vector field (a surrogate's).
 
-    ``point_source`` is the Python source of ``point`` (scalar code using ``math``); no
-    physical effects act on it (rotor limits and sensor effects do).
+    ``point_source`` is the Python source of ``point`` (scalar code using ``math``) over the
+    vehicle's rigid-body state. Drag and wind do not act on it (rotor limits and sensor
+    effects do). With rotor dynamics the rotor thrusts are states as in the vehicles' fields
+    (dT/dt = (T_cmd - T) / tau) and ``point`` sees their mix as its input: a model whose
+    inputs act through a first-order lag is stepped with its actuators.
     """
     obs_mod, obs_name = _ref(vehicle.point_observe)
     footer = (
@@ -687,7 +722,11 @@ def point_rhs_kernels(vehicle: Any, point_source: str) -> Kernels:
         + point_source
         + '\n\n@numba.njit(cache=True, inline="always")\n'
         "def _field(x, u, thrust, wind, p, c, out):\n"
-        "    point(x, u, out)\n\n\n"
+        "    point(x, u, out)\n"
+        "    if c[_ROTOR] != 0.0:\n"
+        "        for j in range(_N_ROTOR):\n"
+        "            out[_N_STATE + j] = (thrust[j] - x[_N_STATE + j]) / p[_P_TAU]\n\n\n"
+        "from quad_envs.physics import P_TAU as _P_TAU  # noqa: E402\n"
         f"from {obs_mod} import {obs_name} as _observe  # noqa: E402\n"
     ) + _sizes(vehicle)
     kernels = build_kernels(footer, (sys.modules[obs_mod].__file__,), f"{vehicle.name}_model")

@@ -7,7 +7,10 @@ termination. The single env is the kernel with a batch of one. A surrogate envir
 same class with the vector field replaced by an identified model's ``rhs`` (a Python
 ``rhs(x, u)`` is integrated by :func:`quad_envs.integrators.rk4_step`; an object with a
 ``point_source`` attribute, the source of a scalar ``point(X, U, out)`` such as
-:class:`identification.compiled.CompiledRhs`, is compiled into the kernel).
+:class:`identification.compiled.CompiledRhs`, is compiled into the kernel). Of the physical
+effects only rotor dynamics applies to such a field: its input is then the mix of the
+rotor-thrust states (:class:`quad_envs.physics.RotorLagField`), the surrogate of a model
+whose inputs act through a first-order lag.
 """
 
 from __future__ import annotations
@@ -213,10 +216,11 @@ class _EnvCore:
         self._n, self._k, self._m = veh.n_states, veh.n_rotors, veh.n_inputs
         self.effects = _effects(config.effects, veh.ndim, self._k)
         effects = self.effects
-        if rhs is not None and effects.physical:
+        if rhs is not None and (effects.drag or effects.wind):
             raise ValueError(
-                "rotor_dynamics, drag and wind are part of the ground-truth vector field; "
-                "with rhs= only sensor effects and rotor limits apply"
+                "drag and wind are part of the ground-truth vector field; with rhs= only "
+                "rotor_dynamics (the rhs's inputs are then the mixed, lagged rotor thrusts), "
+                "sensor effects and rotor limits apply"
             )
         frac = effects.rotor_max_fraction or (1.0,) * self._k
         if len(frac) != self._k:
@@ -533,8 +537,19 @@ class _EnvCore:
                 if not active.all():
                     u[~active] = 0.0
                     u_cmd[~active] = 0.0
-                moved = rk4_step(rhs, X[active], u[active], self.dt, self.substeps)
-                X[active] = moved
+                if self._rotor_state:  # the thrust states follow the limited rotor commands
+                    thrust = np.empty((b, self._k))
+                    physics.rotor_command_batch(
+                        A, P, self._consts, self._mix, self._unmix, self._box, self._frac,
+                        thrust, self._work_array,
+                    )  # fmt: skip
+                    thrust = thrust[active]
+                    tau = P[:, physics.P_TAU] if P.shape[0] == 1 else P[active, physics.P_TAU]
+                    field = physics.RotorLagField(rhs, self._mix, self._n, tau[:, None])
+                    X[active] = rk4_step(field, X[active], thrust, self.dt, self.substeps)
+                    u[active] = X[active, self._n :] @ self._mix.T  # applied: at the step's end
+                else:
+                    X[active] = rk4_step(rhs, X[active], u[active], self.dt, self.substeps)
                 kern.finish(
                     X, refs, self._consts, rng, bias, self._obsbox, self._xbox, obs, reward, end
                 )
@@ -561,7 +576,9 @@ class QuadrotorEnv(_EnvCore, gym.Env):
     Args:
         render_mode: ``rgb_array`` (frames) or ``human`` (a matplotlib window: needs a display;
             without one nothing is shown).
-        rhs: Vector field replacing the ground-truth physics (surrogate models).
+        rhs: Vector field replacing the ground-truth physics (surrogate models). With
+            ``rotor_dynamics`` its input is the mix of the rotor-thrust states: a model
+            whose inputs act through a first-order lag, stepped with its actuators.
         **options: The fields of :class:`EnvConfig` (``trajectory``, ``dt``, ``substeps``,
             ``duration``, ``normalize_actions``, ``init_state_scale``, ``obs_noise_std``,
             ``param_randomization``, ``params``, ``volume``, ``vehicle``, ``effects``,
