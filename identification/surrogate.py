@@ -6,10 +6,19 @@ saturation and RK4) with the ground-truth vector field replaced by the model's c
 ``terminated`` with ``info["out_of_bounds"]`` set, and the observation stays finite. Where the
 model file records its training range, each step's ``info["outside_training"]`` says how far
 the rollout went past it (in widths of the range; 0 inside): the model was tested only there.
+
+A model whose inputs act through a first-order lag (identified with ``--input-lag``:
+``meta["input_lag"]`` = tau) steps with its actuators: its surrogate is the env with rotor
+dynamics at that time constant, the model driven by the mix of the rotor-thrust states (the
+lag is linear and the same for every rotor, so those are the lagged commands it was fitted
+to). Its observation then ends with the rotor thrusts, as the ground truth's with rotor
+dynamics (``effects={"observe_rotors": False}`` drops them).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import os
 import re
 import warnings
@@ -48,14 +57,6 @@ def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: b
         raise ValueError("a surrogate env needs model= (a model object or a model JSON path)")
     if not isinstance(model, IdentifiedModel):
         model = load_model(_model_path(model, "an IdentifiedModel"))
-    lag = model.meta.get("input_lag", 0.0)
-    if lag:  # the env steps its action held over the step: it would drop the lag silently
-        raise ValueError(
-            f"the model's inputs act through a first-order lag of {lag:g} s (identified with "
-            "--input-lag) and a surrogate env steps its action at once, with no actuator "
-            "state: use the model's simulate(), which lags the commands, or identify from "
-            "logged actuator outputs"
-        )
     vehicle = cls.vehicle
     ours = (model.state_names, model.input_names)
     theirs = (vehicle.state_names, vehicle.input_names)
@@ -64,6 +65,62 @@ def _resolve(model: IdentifiedModel | str | Path | None, base_id: str, vector: b
     elif ours != theirs:
         raise ValueError(_mismatch(model, base_id, theirs))
     return model, cls
+
+
+def _lag_options(model: IdentifiedModel, kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The env options of a model whose inputs act through a first-order lag, merged.
+
+    A model identified with ``--input-lag`` (``meta["input_lag"]`` = tau) is fitted to
+    commands that reach the vehicle through ``a' = (c - a) / tau``. Its surrogate is the env
+    with rotor dynamics at that time constant: the lag is linear and the same for every
+    rotor, so the mixed rotor-thrust states are the lagged commands the model was fitted to
+    (and reset puts them at hover). The settings are merged into the user's ``effects`` and
+    ``params``; an :class:`~quad_envs.physics.Effects` or a parameter set names every field,
+    so it is given them; a spec that names them otherwise (``{"rotor_dynamics": False}``,
+    a change of ``rotor_time_constant`` to another value) is a one-line ValueError.
+    """
+    lag = float(model.meta.get("input_lag", 0.0))
+    if not lag:
+        return kwargs
+    options = dict(kwargs)
+    effects = options.get("effects")
+    if effects is None:
+        effects = ["rotor_dynamics"]
+    elif isinstance(effects, str):
+        effects = effects if effects == "all" else [effects, "rotor_dynamics"]
+    elif isinstance(effects, list | tuple):
+        effects = [*effects, *(() if "rotor_dynamics" in effects else ("rotor_dynamics",))]
+    elif isinstance(effects, Mapping):
+        off = effects.get("rotor_dynamics", True)
+        if isinstance(off, bool | np.bool_) and not off:
+            raise ValueError(
+                f"the model's inputs act through a first-order lag of {lag:g} s (identified "
+                "with --input-lag): its surrogate steps them with rotor dynamics, and "
+                "effects asks for rotor_dynamics=False"
+            )
+        effects = {"rotor_dynamics": True, **effects}
+    elif isinstance(effects, physics.Effects):
+        effects = dataclasses.replace(effects, rotor_dynamics=True)
+    options["effects"] = effects  # anything else: the env names what is wrong with it
+    params = options.get("params")
+    if params is None or isinstance(params, Mapping):
+        changes = dict(params or {})
+        asked = changes.get("rotor_time_constant", lag)
+        try:
+            other = not math.isclose(float(asked), lag, rel_tol=1e-9, abs_tol=0.0)
+        except (TypeError, ValueError):
+            other = False  # not a number: the env's parameter check names it
+        if other:
+            raise ValueError(
+                f"the model's inputs act through a first-order lag of {lag:g} s (identified "
+                f"with --input-lag), its surrogate's rotor time constant; params asks for "
+                f"rotor_time_constant={asked}"
+            )
+        changes.setdefault("rotor_time_constant", lag)
+        options["params"] = changes
+    elif dataclasses.is_dataclass(params) and hasattr(params, "rotor_time_constant"):
+        options["params"] = dataclasses.replace(params, rotor_time_constant=lag)
+    return options
 
 
 def _model_path(model: Any, kind: str) -> str | os.PathLike:
@@ -219,10 +276,12 @@ def make_surrogate(
     """A single surrogate env: the base env stepping the model.
 
     The model runs compiled inside the env's kernel (:func:`surrogate_rhs`);
-    ``compiled=False`` steps the numpy ``model.rhs`` (no compile time).
+    ``compiled=False`` steps the numpy ``model.rhs`` (no compile time). A model with an
+    input lag gets rotor dynamics at that time constant (:func:`_lag_options`).
     """
     model, cls = _resolve(model, base_id, vector=False)
-    env = cls(rhs=surrogate_rhs(model, cls, compiled), **kwargs)
+    options = _lag_options(model, kwargs)  # a conflict is named before the compile
+    env = cls(rhs=surrogate_rhs(model, cls, compiled), **options)
     _attach(model, env)
     return env
 
@@ -236,7 +295,8 @@ def make_surrogate_vector(
 ) -> gym.vector.VectorEnv:
     """A native vector surrogate env (the model compiled as in :func:`make_surrogate`)."""
     model, cls = _resolve(model, base_id, vector=True)
-    env = cls(num_envs=num_envs, rhs=surrogate_rhs(model, cls, compiled), **kwargs)
+    options = _lag_options(model, kwargs)
+    env = cls(num_envs=num_envs, rhs=surrogate_rhs(model, cls, compiled), **options)
     _attach(model, env)
     return env
 
@@ -399,24 +459,36 @@ class EnsembleSurrogate(gym.Wrapper):
             self.member_rhs.index = int(
                 self.env.unwrapped.np_random.integers(len(self.ensemble.members))
             )
-        self._state = np.asarray(self.env.unwrapped.state)
+        self._state = self._full_state(info)
         return obs, info
+
+    @staticmethod
+    def _full_state(info: dict[str, Any]) -> np.ndarray:
+        """The state the members step from: with rotor dynamics, the rotor thrusts too."""
+        if "rotor_thrusts" in info:
+            return np.concatenate([info["state"], info["rotor_thrusts"]])
+        return np.asarray(info["state"])
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """Steps the env; truncates where the members' one-step predictions disagree."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         base = self.env.unwrapped
-        k = len(self.ensemble.members)
+        k, n = len(self.ensemble.members), self.scale.size
+        field, applied = self.ensemble, info["action"]
+        if "rotor_commands" in info:  # lagged inputs: the members step the rotors too
+            tau = float(base.params.rotor_time_constant)
+            field = physics.RotorLagField(self.ensemble, np.asarray(base.params.mixer), n, tau)
+            applied = info["rotor_commands"]
         x = np.broadcast_to(self._state, (k, self._state.size))
-        u = np.broadcast_to(info["action"], (k, np.size(info["action"])))
+        u = np.broadcast_to(applied, (k, np.size(applied)))
         with np.errstate(all="ignore"):
-            predictions = rk4_step(self.ensemble, x, u, base.dt, base.substeps)
-        spread = np.ptp(predictions, axis=0) / self.scale
+            predictions = rk4_step(field, x, u, base.dt, base.substeps)
+        spread = np.ptp(predictions[:, :n], axis=0) / self.scale
         disagreement = float(np.max(spread)) if np.isfinite(spread).all() else float("inf")
         info["disagreement"] = disagreement
         if self.threshold is not None and disagreement > self.threshold and not terminated:
             truncated = True
-        self._state = np.asarray(info["state"])
+        self._state = self._full_state(info)
         return obs, reward, terminated, truncated, info
 
 
@@ -434,6 +506,8 @@ def make_ensemble_surrogate(
         models: Ensemble members over the same library (e.g. bagged fits).
         base_id: The ground-truth env the members stand in for.
         mode: ``median`` (the median-coefficient model) or ``sample`` (a member per episode).
+            Members with an input lag (one for all) step with rotor dynamics, as
+            :func:`make_surrogate` does, and predict the step with their rotors.
         threshold: Truncate an episode where the disagreement exceeds this (None: never).
         scale: Per-state scale of the disagreement (default 1).
         **kwargs: Options of the base env (task, dt, ...).
@@ -444,10 +518,17 @@ def make_ensemble_surrogate(
     if mode not in ENSEMBLE_MODES:
         raise ValueError(f"unknown ensemble mode {mode!r}; valid choices: {ENSEMBLE_MODES}")
     ensemble = EnsembleRhs(models)
+    lags = sorted({float(m.meta.get("input_lag", 0.0)) for m in models})
+    if len(lags) > 1:
+        raise ValueError(
+            f"ensemble members act through different input lags ({', '.join(map(str, lags))} "
+            "s): the surrogate steps one actuator lag; identify them with one --input-lag"
+        )
     median = ensemble.median_model()
     _, cls = _resolve(median, base_id, vector=False)
     member_rhs = _MemberRhs(models) if mode == "sample" else None
-    env = cls(rhs=member_rhs if member_rhs is not None else median.rhs, **kwargs)
+    env = cls(rhs=member_rhs if member_rhs is not None else median.rhs,
+              **_lag_options(median, kwargs))  # fmt: skip
     env.model = median
     box = median.training_box()
     if box is not None:

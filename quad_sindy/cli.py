@@ -1049,7 +1049,8 @@ def show(
     if lag:  # the model's inputs are actuators' outputs: it is given commands
         held = [n for n in loaded.input_names if n not in loaded.meta.get("measured_inputs", ())]
         typer.echo(f"{note}inputs: {', '.join(held)} act through a first-order lag of {lag:g} s "
-                   "(the model takes their commands; simulate and score lag them)")  # fmt: skip
+                   "(the model takes their commands; simulate, score and its surrogate env lag "
+                   "them)")  # fmt: skip
     sel = loaded.meta.get("selection")
     chosen = sel.get("chosen") if isinstance(sel, dict) else None
     try:
