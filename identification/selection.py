@@ -90,22 +90,27 @@ from identification.diagnostics import (
     AR1_MAX,
     AR1_MIN,
     INPUT_SHIFTS,
+    REST_ROWS,
     InputTiming,
     angle_offset_note,
+    cut_rows,
     cut_steps,
     data_warnings,
     disagreement_note,
     empty_equation_note,
     equation_error_ar1,
+    held_blocks,
     input_timing,
     kinematic_input_note,
     misfit_note,
     outlier_note,
     outlying_steps,
     position_terms_note,
+    refined_lag,
     stamp_jitter,
     state_bias_note,
     state_shift_note,
+    still_blocks,
 )
 from identification.features import compile_rhs
 from identification.fit import (
@@ -393,6 +398,7 @@ def select_model(
     drop_outliers: bool = False,
     prewhiten: bool | None = None,
     input_lag: float | None = None,
+    keep_rest: bool = False,
 ) -> tuple[IdentifiedModel, SelectionReport]:
     """Identifies a model and chooses its sparsity and window from the data alone.
 
@@ -427,6 +433,9 @@ def select_model(
             predicts better than holding the state, on the least sparse fit) and the data
             carry none of their own, the selection runs again with it and keeps it (a log of
             the commands of motors that lag them; :data:`INPUT_LAGS` tried).
+        keep_rest: Keep rows where the states stay still while the model says they would
+            move (:func:`held_blocks`: a vehicle resting on the ground before take-off or
+            after landing). By default they are left out, with a note.
 
     Returns:
         The model (scores in ``meta["selection"]``, ensemble statistics attached) and the
@@ -442,13 +451,95 @@ def select_model(
         raise TypeError(f"prewhiten must be None, True or False, got {prewhiten!r}")
     prewhiten = None if prewhiten is None else bool(prewhiten)  # np.False_ is not False
     trajs = as_trajectories(trajs)  # (read once: an iterator is selected from twice)
+    # the data as given (the pieces the selection cuts out of them are not judged again: a
+    # ground trial's 20 rows of idle thrust and one step were called a glitch)
+    check_glitches(trajs)
     if input_lag is not None:
         trajs, _ = lag_segments(trajs, input_lag)
     settings = dict(config=config, lambdas=lambdas, windows=windows, folds=folds,
                     horizon=horizon, n_models=n_models, seed=seed, system=system,
                     progress=progress, drop_outliers=drop_outliers)  # fmt: skip
     auto = input_lag is None and not input_lag_of(trajs)
-    return _finished(*_select_timed(trajs, library, settings, prewhiten, auto))
+    if keep_rest:
+        return _finished(*_select_timed(trajs, library, settings, prewhiten, auto))
+    return _finished(*_select_unheld(trajs, library, settings, prewhiten, auto))
+
+
+def _select_unheld(
+    trajs: list[Trajectory], library: Sequence[str], settings: dict, prewhiten: bool | None,
+    auto: bool,
+) -> tuple[IdentifiedModel, SelectionReport]:  # fmt: skip
+    """The selection without the rows where something held the vehicle still.
+
+    A log that starts on the ground (motors idle, then spinning up while the thrust is
+    under the weight) or ends there holds its states still while the inputs move: a
+    held-out trial's flights with 10 to 50 % of their rows on the ground gave gravity 27 %
+    to 36 times off with exit 0, and no note named the ground. Where still blocks
+    (:func:`still_blocks`) exist, the selection runs again without them, and the chunks
+    in which that model says the states would have moved (:func:`held_blocks`) are left
+    out; the blocks it predicts still (a hover) stay in.
+    """
+    try:
+        first = _select_timed(trajs, library, settings, prewhiten, auto)
+    except ValueError as refusal:
+        first, error = None, refusal
+    blocks = still_blocks(trajs)
+    cut = cut_rows(trajs, blocks)[0] if blocks else []
+    if not cut:
+        if first is None:
+            raise error
+        return first
+    try:
+        trial = _select_timed(cut, library, settings, prewhiten, auto)
+    except ValueError:
+        if first is None:
+            raise error from None
+        return first
+    held = held_blocks(trial[0], trajs, blocks)
+    if not held:
+        if first is None:
+            raise error
+        return first
+    rows = sum(b - a for _, a, b, *_ in held)
+    kept, _ = cut_rows(trajs, held)  # hover blocks stay in
+    # where the vehicle met the ground it moved (a touchdown, its bounces, a lift-off from
+    # a soft contact): those steps stand out of the model's residuals and are cut too (a
+    # trial's landing bounces left gravity 15 times off)
+    cutting = {**settings, "drop_outliers": True}
+    try:
+        trial = _select_timed(kept, library, cutting, prewhiten, auto)
+    except ValueError:
+        pass  # the selection without every still block stands
+    model, report = trial
+    report.warnings.insert(0, _rest_note(trajs, held, rows))
+    return model, report
+
+
+def _rest_note(trajs: list[Trajectory], held: list, rows: int) -> str:
+    """What :func:`_select_unheld` left out, and why."""
+    several = len(trajs) > 1
+    spans: list[list[int]] = []
+    for i, a, b, *_ in sorted(held):  # consecutive chunks as one span
+        if spans and spans[-1][0] == i and spans[-1][2] == a:
+            spans[-1][2] = b
+        else:
+            spans.append([i, a, b])
+    shown = []
+    for i, a, b in spans[:6]:
+        source = trajs[i].meta.get("source")
+        where = f" of {source}" if source else (f" (segment {i + 1})" if several else "")
+        shown.append(f"t = {trajs[i].t[a]:.4g} to {trajs[i].t[b - 1]:.4g} s{where}")
+    more = ", ..." if len(spans) > 6 else ""
+    _, _, _, state, moved = max(held, key=lambda h: h[4])
+    return (
+        f"{rows} row(s) in {len(spans)} block(s) ({', '.join(shown)}{more}) hold every state "
+        f"still while the model says they would move ({state} by {moved:.2g} of its spread "
+        f"within {REST_ROWS} rows at most): something held the vehicle there (the ground "
+        "before take-off or after landing, a stand, a tether), which the equations do not "
+        "describe; those rows were left out, and the steps that stand out of the model's "
+        "residuals (a touchdown, its bounces, a lift-off) were cut as --drop-outliers does "
+        "(keep_rest=True / --keep-rest keeps them all)"
+    )
 
 
 def _select_timed(
@@ -473,6 +564,7 @@ def _select_timed(
                                                 prewhiten)  # fmt: skip
         except ValueError:
             raise refusal from None
+        model, report, lag = _refine_lag(trajs, library, settings, prewhiten, model, report, lag)
         report.warnings.insert(0, _lag_note(lag, "no model of the inputs as logged predicted "
                                                  "better than holding the state"))  # fmt: skip
         return model, report
@@ -493,19 +585,45 @@ def _select_timed(
         model, report = _select_prewhitened(lag_segments(trajs, lag)[0], library, settings,
                                             prewhiten)  # fmt: skip
     except ValueError as exc:
-        return as_logged(f"the timing check named a first-order lag of the inputs of {lag:.2g} "
+        return as_logged(f"the timing check named a first-order lag of the inputs of {lag:.3g} "
                          f"s, and the selection with it failed ({exc}): the inputs are kept "
                          "as logged")  # fmt: skip
+    model, report, lag = _refine_lag(trajs, library, settings, prewhiten, model, report, lag)
     logged = kept or plain
     ours, theirs = _relative_score(report), _relative_score(logged[1])
     if ours > theirs:  # a lag that predicts the held-out parts worse is not the vehicle's
-        return as_logged(f"the timing check named a first-order lag of the inputs of {lag:.2g} "
+        return as_logged(f"the timing check named a first-order lag of the inputs of {lag:.3g} "
                          f"s, but the model selected with it predicts its held-out data worse "
                          f"({ours:.3g} of holding the state, against {theirs:.3g}): the inputs "
                          "are kept as logged")  # fmt: skip
     why = f"the model of the inputs as logged had {logged[0].n_terms} terms, score {theirs:.3g}"
     report.warnings.insert(0, _lag_note(lag, f"{why} of holding the state; with it {ours:.3g}"))
     return model, report
+
+
+def _refine_lag(
+    trajs: list[Trajectory], library: Sequence[str], settings: dict, prewhiten: bool | None,
+    model: IdentifiedModel, report: SelectionReport, lag: float,
+) -> tuple[IdentifiedModel, SelectionReport, float]:  # fmt: skip
+    """The selection with the lag refined on the terms of the model selected with ``lag``.
+
+    The timing check's lag comes from the model of the inputs as logged and lands a few per
+    cent off (:func:`~identification.diagnostics.refined_lag`); where the model selected with
+    it fits its own terms best at another lag (3 significant digits), the selection runs
+    again with that one and is kept where it predicts its held-out data at least as well.
+    """
+    window = int(model.meta["window"])
+    better = refined_lag(trajs, model.feature_names, window, model.coefficients, lag)
+    better = float(f"{better:.3g}")
+    if better == lag:
+        return model, report, lag
+    try:
+        again = _select_prewhitened(lag_segments(trajs, better)[0], library, settings, prewhiten)
+    except ValueError:
+        return model, report, lag
+    if _relative_score(again[1]) > _relative_score(report):
+        return model, report, lag
+    return *again, better
 
 
 def _relative_score(report: SelectionReport) -> float:
@@ -521,7 +639,7 @@ def _named_lag(timing: InputTiming | None) -> float | None:
 def _lag_note(lag: float, why: str) -> str:
     """The note of a selection run again with the lag the timing check named."""
     return (
-        f"the inputs act through a first-order lag of {lag:.2g} s (the actuators lag their "
+        f"the inputs act through a first-order lag of {lag:.3g} s (the actuators lag their "
         f"commands): the timing check named it and the model was selected with it ({why}; "
         "--input-lag 0 or input_lag=0 keeps the inputs as logged). Where the states are "
         "instead filtered estimates that lag the inputs, the lag stands in for the filter: "
@@ -670,7 +788,6 @@ def _select_model(
     """
     from tqdm import tqdm
 
-    check_glitches(trajs)
     first = trajs[0]
     if any((t.state_names, t.input_names) != (first.state_names, first.input_names) for t in trajs):
         raise ValueError("all trajectories must have the same state and input names")
@@ -872,10 +989,8 @@ def _select_model(
         stale = tuple(f"{first.state_names[i]}': the best support of" for i in moved)
         report.warnings = [w for w in report.warnings if not w.startswith(stale)]
     if not np.any(xi):  # the least sparse fit may still tell inputs logged out of time
-        w0 = min(pilots)
-        hint = input_timing(used, names, w0, pilots[w0],
-                            long_run_ratio(used, names, pilots[w0], w0))  # fmt: skip
-        said = f"; the least sparse fit says: {hint.note}" if hint else ""
+        hint = _pilot_timing(used, names, pilots)
+        said = f"; {hint.note}" if hint else ""
         raise NoModelError(_empty_model_message(candidates, report.hold) + said, hint)
     # An input in a kinematic relation is the sign of inputs that changed within the step;
     # whole-row shifts fit such logs a little better and worse predict (a trial: 30 % -> 35 %
@@ -884,6 +999,10 @@ def _select_model(
     driven = kinematic_input_note(used, names, xi)
     report.timing = input_timing(used, names, best.window, xi, ratio,
                                  shifts=() if driven else INPUT_SHIFTS)  # fmt: skip
+    if report.timing is None and best.mean > POOR_FIT * report.hold:
+        # a model that predicts little may lack the very input terms the check refits (our
+        # own flights at 80 ms and noise 1e-2: phi_dot' = sin(phi) u1): ask the least sparse fit
+        report.timing = _pilot_timing(used, names, pilots)
     shifted = report.timing.note if report.timing else None
     shifted = shifted or state_shift_note(used, names, best.window, xi, ratio)
     shifted = shifted or angle_offset_note(xi, names, first.state_names)
@@ -946,6 +1065,17 @@ def _select_model(
     model = IdentifiedModel(names, xi, first.state_names, first.input_names, system, meta,
                             std, prob)  # fmt: skip
     return model, report
+
+
+def _pilot_timing(
+    used: Sequence[Trajectory], names: Sequence[str], pilots: dict[int, np.ndarray]
+) -> InputTiming | None:
+    """The input timing the least sparse fit (the narrowest window's pilot) names."""
+    w0 = min(pilots)
+    hint = input_timing(used, names, w0, pilots[w0], long_run_ratio(used, names, pilots[w0], w0))
+    if hint is None:
+        return None
+    return dataclasses.replace(hint, note=f"the least sparse fit says: {hint.note}")
 
 
 def _warned(

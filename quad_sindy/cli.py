@@ -575,6 +575,14 @@ def identify(
             "reported"
         ),
     ] = False,
+    keep_rest: Annotated[
+        bool,
+        typer.Option(
+            help="keep rows where every state stays still while the model says they would "
+            "move (a vehicle resting on the ground before take-off or after landing); by "
+            "default they are left out with the steps that stand out next to them"
+        ),
+    ] = False,
     prewhiten: Annotated[
         bool | None,
         typer.Option(
@@ -787,7 +795,7 @@ def identify(
                     prewhiten = False  # a prewhitened fit is at window 1: the window asked
                 model, report = select_model(
                     trajs, lib, config=config, windows=windows, system=label, progress=True,
-                    drop_outliers=drop_outliers, prewhiten=prewhiten,
+                    drop_outliers=drop_outliers, prewhiten=prewhiten, keep_rest=keep_rest,
                     input_lag=0.0 if lag_value == 0 else None,  # (a lag given: the data's)
                 )  # fmt: skip
                 noted = ()  # printed with the report
@@ -815,6 +823,9 @@ def identify(
             else:
                 if drop_outliers:
                     _fail("--drop-outliers works with the automatic selection (--lambda auto)")
+                if keep_rest:
+                    _fail("--keep-rest works with the automatic selection (--lambda auto): a "
+                          "fixed lambda keeps every row")  # fmt: skip
                 if prewhiten:
                     _fail("--prewhiten works with the automatic selection (--lambda auto)")
                 config = dataclasses.replace(config, lam=lam_value, window=window_value or 1)
