@@ -809,6 +809,10 @@ REST_SHARE = 0.05
 chunk must leave it by (and :data:`REST_NOISE` noise deviations) for the chunk to be held."""
 
 REST_NOISE = 10.0
+"""Noise deviations (:func:`_state_noise`) a held chunk's prediction must leave a state by."""
+
+REST_BAND = 8.0
+"""Noise deviations within which every state of a still block stays (:func:`still_blocks`)."""
 
 REST_MARGIN = 3.0
 """A held chunk leaves the logged states by this many times what the model leaves them by in
@@ -832,13 +836,14 @@ def _state_noise(trajs: Sequence[Trajectory]) -> np.ndarray:
 def still_blocks(trajs: Sequence[Trajectory]) -> list[tuple[int, int, int]]:
     """Blocks of rows where every state stays within its noise: (trajectory, start, stop).
 
-    A block spans at least :data:`REST_ROWS` rows in which no state's range exceeds 8 of its
-    noise deviations (:func:`_state_noise`; exact repeats on clean data). A vehicle resting
-    on the ground, or hovering, looks like this; :func:`held_blocks` tells them apart.
+    A block spans at least :data:`REST_ROWS` rows in which no state's range exceeds
+    :data:`REST_BAND` of its noise deviations (:func:`_state_noise`; exact repeats on clean
+    data). A vehicle resting on the ground, or hovering, looks like this; :func:`held_blocks`
+    tells them apart.
     """
     sigma = _state_noise(trajs)
     spread = np.nanstd(np.concatenate([t.x for t in trajs]), axis=0)
-    band = 8.0 * sigma + 1e-9 * np.maximum(spread, 1e-300)
+    band = REST_BAND * sigma + 1e-9 * np.maximum(spread, 1e-300)
     found = []
     for i, tr in enumerate(trajs):
         n = len(tr)
@@ -878,7 +883,7 @@ def held_blocks(
     spread = np.nanstd(np.concatenate([t.x for t in trajs]), axis=0)
     bar = np.maximum(np.maximum(REST_SHARE * spread, REST_NOISE * sigma), 1e-300)
 
-    def chunks(i: int, a: int, b: int) -> list[tuple[int, int]]:
+    def chunks(a: int, b: int) -> list[tuple[int, int]]:
         starts = range(a, b - REST_ROWS + 1, REST_ROWS)  # the last chunk takes the rest
         return [(s, b if b - s < 2 * REST_ROWS else s + REST_ROWS) for s in starts]
 
@@ -904,14 +909,14 @@ def held_blocks(
     for i in range(len(trajs)):
         edges = np.flatnonzero(np.diff(np.concatenate([[0], (~still[i]).astype(int), [0]])))
         moving += [(i, *c) for a, b in zip(edges[::2], edges[1::2], strict=True)
-                   for c in chunks(i, int(a), int(b))]  # fmt: skip
+                   for c in chunks(int(a), int(b))]  # fmt: skip
     picks = np.unique(np.linspace(0, len(moving) - 1, min(len(moving), REST_SAMPLE)).astype(int))
     typical = [g for k in picks if moving and (g := gap(*moving[k])) is not None]
     usual = float(np.quantile([np.max(g / bar) for g in typical], 0.95)) if typical else 0.0
     threshold = max(1.0, REST_MARGIN * usual)
     held = []
     for i, a, b in blocks:
-        for start, stop in chunks(i, a, b):
+        for start, stop in chunks(a, b):
             far = gap(i, start, stop)
             if far is not None and np.max(far / bar) > threshold:
                 j = int(np.argmax(far / np.maximum(spread, 1e-300)))
