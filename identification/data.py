@@ -292,13 +292,15 @@ def lag_segments(trajs: Sequence[Trajectory], tau: float) -> tuple[list[Trajecto
     return kept, len(trajs) - len(kept)
 
 
-def lagged_inputs(t: np.ndarray, commands: np.ndarray, tau: float) -> np.ndarray:
+def lagged_inputs(
+    t: np.ndarray, commands: np.ndarray, tau: float, start: np.ndarray | None = None
+) -> np.ndarray:
     """The output at each row of actuators that follow held commands through a lag ``tau``.
 
     With ``a' = (c - a) / tau`` and command ``c_k`` held over step k of length ``h_k``,
     ``a(t_k + s) = c_k + (a_k - c_k) exp(-s / tau)`` (:func:`lag_stages`), so ``a_{k+1} =
     c_k + (a_k - c_k) alpha_k`` with ``alpha_k = exp(-h_k / tau)``, each row's own step.
-    ``a_0 = c_0``: the actuators start at the first command.
+    ``a_0 = start``; by default ``c_0``: the actuators start at the first command.
     """
     from scipy.signal import lfilter
 
@@ -306,13 +308,13 @@ def lagged_inputs(t: np.ndarray, commands: np.ndarray, tau: float) -> np.ndarray
     a = np.empty_like(c)
     if not len(c):
         return a
-    a[0] = c[0]
+    a[0] = c[0] if start is None else start
     steps = np.diff(t)
     alpha = np.exp(-steps / tau)
     if steps.size and np.ptp(steps) <= 1e-9 * steps[0]:  # a uniform grid: a linear filter
         gain = float(alpha[0])
         a[1:] = lfilter([1.0 - gain], [1.0, -gain], c[:-1], axis=0,
-                        zi=np.full((1, c.shape[1]), gain) * c[0])[0]  # fmt: skip
+                        zi=np.full((1, c.shape[1]), gain) * a[0])[0]  # fmt: skip
     else:  # each row's own step: a recursion one row at a time
         for k in range(len(c) - 1):
             a[k + 1] = c[k] + alpha[k] * (a[k] - c[k])

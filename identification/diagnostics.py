@@ -887,6 +887,14 @@ def held_blocks(
         starts = range(a, b - REST_ROWS + 1, REST_ROWS)  # the last chunk takes the rest
         return [(s, b if b - s < 2 * REST_ROWS else s + REST_ROWS) for s in starts]
 
+    lag = float(model.meta.get("input_lag", 0.0))
+    measured = set(model.meta.get("measured_inputs", ()))
+    held_inputs = [k for k, n in enumerate(model.input_names) if n not in measured]
+    # a lagged model's actuators are where the commands since the segment's start put them
+    # (started at a chunk's first command, the dithered commands of a trial's airborne
+    # flights left every chunk by 2.85 bars in phi_dot, and 8 of 8 lost rows as "held")
+    outputs = [t.lag_inputs(lag, settle=False).u if lag and held_inputs else None for t in trajs]
+
     def gap(i: int, start: int, stop: int) -> np.ndarray | None:
         """How far the model's path leaves the logged states over rows [start, stop)."""
         tr = trajs[i]
@@ -894,9 +902,11 @@ def held_blocks(
         if not np.isfinite(x).all():
             return None
         inputs = tr.commands if tr.commands is not None else tr.u
+        at = None if outputs[i] is None else outputs[i][start, held_inputs]
         with np.errstate(all="ignore"):
             try:
-                path = model.simulate(x[0], inputs[start : stop - 1], np.diff(tr.t[start:stop]))
+                path = model.simulate(x[0], inputs[start : stop - 1], np.diff(tr.t[start:stop]),
+                                      actuators=at)  # fmt: skip
             except (ValueError, FloatingPointError):
                 return None
             far = np.nanmax(np.abs(path - x), axis=0)

@@ -212,7 +212,12 @@ class IdentifiedModel:
 
     # -- simulation -------------------------------------------------------------------
     def simulate(
-        self, x0: np.ndarray, inputs: np.ndarray | None, dt: float | np.ndarray, substeps: int = 1
+        self,
+        x0: np.ndarray,
+        inputs: np.ndarray | None,
+        dt: float | np.ndarray,
+        substeps: int = 1,
+        actuators: np.ndarray | None = None,
     ) -> np.ndarray:
         """Open loop by RK4, input row k over step k. Returns states, shape (len(inputs)+1, n).
 
@@ -222,6 +227,9 @@ class IdentifiedModel:
             dt: The step, or one step per input row (a log's own steps, jitter and all:
                 ``np.diff(t, append=2 * t[-1] - t[-2])``).
             substeps: RK4 substeps per step.
+            actuators: For a model with an input lag, the actuators' output at the start,
+                one value per held input (default: the first command; a vehicle whose
+                rotors start at hover, or a piece cut from a longer flight, starts elsewhere).
 
         Commands are held over their step. Inputs the model was identified with as measured
         signals (``meta.measured_inputs``) are interpolated within each step as in the fit
@@ -268,6 +276,13 @@ class IdentifiedModel:
         lag = float(self.meta.get("input_lag", 0.0))
         held = [k for k in range(inputs.shape[1]) if k not in measured]
         lagged = lag > 0 and bool(held)
+        if actuators is not None:
+            actuators = np.asarray(actuators, dtype=np.float64).ravel()
+            if not lagged or actuators.shape != (len(held),) or not np.isfinite(actuators).all():
+                raise ValueError(
+                    "actuators= is the start of the lagged actuators, one finite value per held "
+                    f"input ({len(held) if lagged else 0} here: the model's input lag is {lag:g} s)"
+                )
         if measured or lagged:  # inputs that move within each step, as in the fit
             from identification.data import lag_stages, lagged_inputs, stage_inputs
             from identification.fit import rk4_steps
@@ -276,7 +291,7 @@ class IdentifiedModel:
             commands = inputs
             if lagged:  # commands: the actuators' output at each row, and within the step
                 inputs = inputs.copy()
-                inputs[:, held] = lagged_inputs(t[:-1], commands[:, held], lag)
+                inputs[:, held] = lagged_inputs(t[:-1], commands[:, held], lag, actuators)
             um, u1 = inputs.copy(), inputs.copy()  # the last step holds measured signals
             inner = np.arange(len(inputs) - 1)
             _, um[inner], u1[inner] = stage_inputs(t[:-1], inputs, inner, measured)

@@ -688,6 +688,17 @@ def test_lagged_inputs_follow_a_first_order_actuator_exactly():
         ref.append(z[:4])
     got = model.simulate(np.zeros(4), c[:20], 0.01)
     np.testing.assert_allclose(got, ref, rtol=1e-4, atol=1e-8)  # (RK4's own error: (h/tau)^5)
+    # actuators that start elsewhere (at hover, or where a longer flight left them)
+    start, z, other = np.array([0.7, -0.4]), np.array([0, 0, 0, 0, 0.7, -0.4]), [np.zeros(4)]
+    for k in range(20):
+        z = solve_ivp(lambda s, z, k=k: [z[2], z[3], z[4], 200 * z[5], *(c[k] - z[4:]) / tau],
+                      (0, 0.01), z, rtol=1e-12, atol=1e-14).y[:, -1]  # fmt: skip
+        other.append(z[:4])
+    started = model.simulate(np.zeros(4), c[:20], 0.01, actuators=start)
+    np.testing.assert_allclose(started, other, rtol=1e-3, atol=1e-8)  # (a steeper transient)
+    assert np.abs(got - other).max() > 100 * np.abs(started - other).max()
+    with pytest.raises(ValueError, match="one finite value per held input"):
+        model.simulate(np.zeros(4), c[:20], 0.01, actuators=[0.7])
     model.meta.pop("input_lag")  # the commands taken as acting at once: far off
     assert (
         np.abs(model.simulate(np.zeros(4), c[:20], 0.01) - ref).max()
