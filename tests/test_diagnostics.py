@@ -787,7 +787,7 @@ def _flights_from_the_ground(mass: float, ixx: float, seed: int, land: bool) -> 
     return flights
 
 
-def test_rows_where_the_ground_holds_the_vehicle_are_left_out_and_named():
+def test_rows_where_the_ground_holds_the_vehicle_are_left_out_and_named(tmp_path):
     """Logs that start on the floor (thrust spinning up under the weight) and land again:
     a held-out trial's flights gave gravity 27 % to 36 times off with exit 0, and no note
     named the ground. The still rows the model says would have moved are left out with a
@@ -807,6 +807,15 @@ def test_rows_where_the_ground_holds_the_vehicle_are_left_out_and_named():
     assert "hold every state still while the model says they would move" in report.warnings[0]
     wrong = check_support(kept, truth)
     assert not wrong.exact_support or wrong.max_rel_error > 0.01  # the ground in the fit
+    paths = [str(write_trajectory_csv(tmp_path / f"g{i}.csv", t)) for i, t in enumerate(flights)]
+    out = str(tmp_path / "m.json")
+    run = CliRunner().invoke(app, ["identify", *paths, "--system", "planar", "--out", out])
+    assert run.exit_code == 0 and "hold every state still" in run.output, run.output
+    fixed = CliRunner().invoke(app, ["identify", *paths, "--system", "planar", "--lambda",
+                                     "0.001", "--keep-rest", "--out", out])  # fmt: skip
+    assert fixed.exit_code == 2 and "--keep-rest works with the automatic selection" in (
+        fixed.output
+    )
     # a log already in the air gets no such note
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentificationWarning)
