@@ -449,21 +449,25 @@ def sweep6(seeds, config):
         )
 
 
+GUST_VEHICLES = {
+    "m=0.45 kg, Ixx=3e-3": PlanarQuadParams(mass=0.45, Ixx=3e-3, arm_length=0.12,
+                                            rotor_force_max=9.0),
+    "m=1.4 kg, Ixx=1.5e-2": PlanarQuadParams(mass=1.4, Ixx=1.5e-2, arm_length=0.2,
+                                             rotor_force_max=30.0),
+}  # fmt: skip
+"""The two vehicles of the gust and lag figures (:func:`gusty_planar_flights`' PD inverts m and
+Ixx, so both fly the same paths)."""
+
+
 def gusts(seeds, config):
     """Unmeasured gusts in closed loop (:func:`gusty_planar_flights`, its own simulator): the
     plain fit (``prewhiten=False``) against the default, on two vehicles and two gust levels;
     the 1 s error is on three clean flights of the same vehicle."""
-    vehicles = {
-        "m=0.45 kg, Ixx=3e-3": PlanarQuadParams(mass=0.45, Ixx=3e-3, arm_length=0.12,
-                                                rotor_force_max=9.0),
-        "m=1.4 kg, Ixx=1.5e-2": PlanarQuadParams(mass=1.4, Ixx=1.5e-2, arm_length=0.2,
-                                                 rotor_force_max=30.0),
-    }  # fmt: skip
     print("| vehicle | gust [m g] | seed | error lag-1 corr | plain: terms, off, worst coef, "
           "1 s | default: kept, terms, off, worst coef, 1 s |")  # fmt: skip
     print("|---|---|---|---|---|---|")
     tally = {"better": 0, "same": 0, "worse": 0}
-    for name, params in vehicles.items():
+    for name, params in GUST_VEHICLES.items():
         truth = truth_planar(params)
         calm = gusty_planar_flights(params, 0.0, seed=999)
         for gust in (0.02, 0.05):
@@ -501,16 +505,10 @@ def lags(config):
     model says."""
     from identification.scoring import held_out_errors
 
-    vehicles = {
-        "m=0.45 kg, Ixx=3e-3": PlanarQuadParams(mass=0.45, Ixx=3e-3, arm_length=0.12,
-                                                rotor_force_max=9.0),
-        "m=1.4 kg, Ixx=1.5e-2": PlanarQuadParams(mass=1.4, Ixx=1.5e-2, arm_length=0.2,
-                                                 rotor_force_max=30.0),
-    }  # fmt: skip
     print("| vehicle | lag [s] | as logged: terms, off, worst coef, 1 s | default: lag fitted, "
           "terms, off, worst coef, 1 s |")  # fmt: skip
     print("|---|---|---|---|")
-    for name, params in vehicles.items():
+    for name, params in GUST_VEHICLES.items():
         truth = truth_planar(params)
         for lag in (0.02, 0.04, 0.08):
             data = gusty_planar_flights(params, 0.0, seed=1, lag=lag)
