@@ -523,7 +523,8 @@ def _rest_note(trajs: list[Trajectory], held: list, rows: int) -> str:
     _, _, _, state, moved = max(held, key=lambda h: h[4])
     return (
         f"{rows} row(s) in {len(spans)} block(s) ({', '.join(shown)}{more}) hold every state "
-        f"still while the model says they would move ({state} by {moved:.2g} of its spread "
+        "still (or all but one, drifting steadily as an estimate on the ground does) while "
+        f"the model says they would move ({state} by {moved:.2g} of its spread "
         f"within {REST_ROWS} rows at most): something held the vehicle there (the ground "
         "before take-off or after landing, a stand, a tether), which the equations do not "
         "describe; those rows were left out, and the steps that stand out of the model's "
