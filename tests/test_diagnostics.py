@@ -839,7 +839,7 @@ def test_rows_where_the_ground_holds_the_vehicle_are_left_out_and_named(tmp_path
 def test_an_altitude_estimate_drifting_on_the_floor_is_still_the_ground():
     """A barometer in the rotors' wash: the altitude estimate drifts at 5 cm/s while the
     vehicle rests, and keeps its offset in the air. A held-out trial's drifting ground rows
-    were never still (only 80 rows cut; 13 terms, 16 % at 1 s). One state drifting along a
+    were never still (10 terms, 17 % at 1 s, no note). One state drifting along a
     line over at least 1 s of rows is a still block too: the exact model and the note. A
     steady climb in the air looks the same and is flown by the model: not held."""
     from identification.diagnostics import held_blocks, still_blocks
