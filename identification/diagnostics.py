@@ -420,13 +420,18 @@ def spread_blocks(trajs: Sequence[Trajectory], rows: int, block: int = 2000) -> 
 
     All of the data where it holds no more; else every trajectory cut into blocks (a last
     one under a quarter of a block left out) and an evenly spaced choice of them, so that
-    each log and each part of a long one is represented.
+    each log and each part of a long one is represented. Data in pieces all shorter than
+    that (a long noisy log cut around its rows at rest) give about ``rows`` rows of them.
     """
-    if sum(len(t) for t in trajs) <= rows:
+    total = sum(len(t) for t in trajs)
+    if total <= rows:
         return list(trajs)
     parts = [t.slice(a, min(a + block, len(t))) for t in trajs for a in range(0, len(t), block)]
-    parts = [p for p in parts if len(p) > block // 4]
-    picks = np.unique(np.linspace(0, len(parts) - 1, max(rows // block, 1)).round().astype(int))
+    long = [p for p in parts if len(p) > block // 4]
+    # (a 1e5-row log at sigma = 1e-2 cut around its still blocks left none: an IndexError)
+    count = max(rows // block, 1) if long else max(rows * len(parts) // total, 1)
+    parts = long or parts
+    picks = np.unique(np.linspace(0, len(parts) - 1, count).round().astype(int))
     return [parts[i] for i in picks]
 
 

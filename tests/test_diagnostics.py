@@ -442,6 +442,13 @@ def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inpu
     blocks = spread_blocks(many, SHIFT_ROWS, block=500)
     assert sum(map(len, blocks)) <= SHIFT_ROWS and len(blocks) >= 30
     assert "y_dot taken 2 row(s) later" in state_shift_note(many, names, w, xi, ratio)
+    # pieces all shorter than a quarter block (a 1e5-row log at sigma = 1e-2 cut around its
+    # rows at rest raised an IndexError): about SHIFT_ROWS rows of them, from every part
+    short = [t.slice(a, a + 90) for t in many for a in range(0, len(t) - 90, 100)]
+    assert sum(map(len, short)) > SHIFT_ROWS
+    picked = spread_blocks(short, SHIFT_ROWS, block=500)
+    assert 0.9 * SHIFT_ROWS <= sum(map(len, picked)) <= SHIFT_ROWS
+    assert np.array_equal(picked[0].x, short[0].x) and np.array_equal(picked[-1].x, short[-1].x)
     only_z = np.zeros_like(xi)  # no equation reads y (a fuzzed log's empty equations)
     only_z[1, names.index("z_dot")] = 1.0
     with warnings.catch_warnings():
