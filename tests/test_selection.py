@@ -726,6 +726,7 @@ def test_six_dof_open_loop_flights_with_drag_give_the_drag_terms_and_the_exact_m
     assert rhs_error(model, quad6dof_drag_rhs(OTHER_6DOF, 0.3), trajs) < 1e-5
 
 
+@pytest.mark.slow  # 45 s: the suite keeps under 10 minutes on 2 cores
 def test_noisy_six_dof_flights_at_large_tilt_keep_every_true_term_and_few_noise_terms():
     """Open-loop swings to 0.8 rad with sigma = 1e-3: the twins differ there, every true term
     is found; the terms that only fit noise (18 before the long-run significance pruning,
