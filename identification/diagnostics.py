@@ -871,22 +871,29 @@ def still_blocks(trajs: Sequence[Trajectory]) -> list[tuple[int, int, int]]:
             local = 1.4826 * np.nanmedian(np.abs(second - np.nanmedian(second, axis=2,
                                                                        keepdims=True)),
                                           axis=2) / np.sqrt(6.0)  # fmt: skip
-            within = ranges <= np.maximum(band, REST_BAND * local)  # window k: rows k.. k+19
+            limit = np.maximum(band, REST_BAND * local)
+            within = ranges <= limit  # window k: rows k.. k+19
+            covered = _covered(np.flatnonzero(np.all(within, axis=1)), n, 1)
             # one state along a line (a trial's altitude estimate drifting 5 cm/s on the
-            # ground never looked still: 10 terms, 17 % off at 1 s, and no note)
-            centred = windows - np.nanmean(windows, axis=2, keepdims=True)
-            off_line = centred - np.einsum("kst,t->ks", centred, line)[..., None] * line
-            straight = np.nanmax(off_line, axis=2) - np.nanmin(off_line, axis=2)
-            drifting = (np.sum(~within, axis=1) == 1) & np.all(
-                within | (straight <= np.maximum(band, REST_BAND * local)), axis=1
-            )
-        if windows.shape[1] < 3:  # two states at least stay still (a thermal system's one
-            drifting[:] = False  # state along a line is no sign of anything held)
-        covered = _covered(np.flatnonzero(np.all(within, axis=1)), n, 1)
-        covered |= _covered(np.flatnonzero(drifting), n, REST_DRIFT_ROWS)
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], covered.astype(int), [0]])))
-        found += [(i, int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+            # ground never looked still: 10 terms, 17 % off at 1 s, and no note); two at
+            # least stay still (a thermal system's one state along a line is no sign of
+            # anything held)
+            if windows.shape[1] >= 3:
+                centred = windows - np.nanmean(windows, axis=2, keepdims=True)
+                off_line = centred - np.einsum("kst,t->ks", centred, line)[..., None] * line
+                straight = np.nanmax(off_line, axis=2) - np.nanmin(off_line, axis=2)
+                drifting = (np.sum(~within, axis=1) == 1) & np.all(
+                    within | (straight <= limit), axis=1
+                )
+                covered |= _covered(np.flatnonzero(drifting), n, REST_DRIFT_ROWS)
+        found += [(i, a, b) for a, b in _runs(covered)]
     return found
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The (start, stop) of each run of True in ``mask``."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def _covered(starts: np.ndarray, n: int, least: int) -> np.ndarray:
@@ -898,8 +905,7 @@ def _covered(starts: np.ndarray, n: int, least: int) -> np.ndarray:
     np.add.at(rows, starts, 1)
     np.add.at(rows, starts + REST_ROWS, -1)
     covered = np.cumsum(rows)[:n] > 0
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], covered.astype(int), [0]])))
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
+    for a, b in _runs(covered):
         if b - a < least:
             covered[a:b] = False
     return covered
@@ -959,9 +965,7 @@ def held_blocks(
         still[i][a:b] = True
     moving = []  # the chunks of the rest of the data, evenly spread
     for i in range(len(trajs)):
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], (~still[i]).astype(int), [0]])))
-        moving += [(i, *c) for a, b in zip(edges[::2], edges[1::2], strict=True)
-                   for c in chunks(int(a), int(b))]  # fmt: skip
+        moving += [(i, *c) for a, b in _runs(~still[i]) for c in chunks(a, b)]
     picks = np.unique(np.linspace(0, len(moving) - 1, min(len(moving), REST_SAMPLE)).astype(int))
     typical = [g for k in picks if moving and (g := gap(*moving[k])) is not None]
     usual = float(np.quantile([np.max(g / bar) for g in typical], 0.95)) if typical else 0.0
@@ -989,12 +993,11 @@ def cut_rows(
     out: list[Trajectory] = []
     lost = 0
     for i, tr in enumerate(trajs):
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], (~drop[i]).astype(int), [0]])))
-        for a, b in zip(edges[::2], edges[1::2], strict=True):
+        for a, b in _runs(~drop[i]):
             if b - a >= MIN_UNIT_ROWS:
-                out.append(tr.slice(int(a), int(b)))
+                out.append(tr.slice(a, b))
             else:
-                lost += int(b - a)
+                lost += b - a
     return out, lost
 
 
