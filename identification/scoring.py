@@ -91,12 +91,107 @@ def long_enough(trajs: Sequence[Trajectory], window: int) -> list[Trajectory]:
     return [t for t in trajs if len(t) > window]
 
 
+START_SPANS = (2, 3, 5, 7, 10, 14, 20)
+"""Half-widths in rows of the local quadratics a start state may be estimated over
+(:func:`start_states`); 0, the logged row itself, is always a choice."""
+
+
+MIN_SPAN_ROWS = 100
+"""Fewest rows that estimate a state's noise, or a span's residuals (:func:`start_spans`)."""
+
+
+def _quadratic_weights(half: int) -> np.ndarray:
+    """Weights giving the centre value of a least-squares quadratic over 2 ``half`` + 1 rows."""
+    j = np.arange(-half, half + 1)
+    return (3 * (3 * half**2 + 3 * half - 1) - 15 * j**2) / (
+        (2 * half + 1) * (4 * half**2 + 4 * half - 3)
+    )
+
+
+def _local_quadratic(x: np.ndarray, half: int) -> np.ndarray:
+    """Each row's value of the quadratic fitted over rows k - half .. k + half (NaN near ends)."""
+    out = np.full(x.shape, np.nan)
+    if len(x) > 2 * half:
+        windows = np.lib.stride_tricks.sliding_window_view(x, 2 * half + 1, axis=0)
+        out[half : len(x) - half] = windows @ _quadratic_weights(half)
+    return out
+
+
+def start_spans(units: Sequence[Trajectory]) -> np.ndarray:
+    """Per state, the half-width of the local quadratic that best estimates its true value.
+
+    The mean squared error of a span is its noise share plus its bias, both from the data
+    (Stein's unbiased risk estimate for a linear smoother): a quadratic over 2 m + 1 rows
+    keeps ``w0`` sigma^2 of the noise (``w0`` its centre weight) and leaves residuals of
+    mean square ``(1 - w0) sigma^2 + bias^2``. sigma comes from the third differences, whose
+    variance and lag-1 covariance hold the white noise and a random walk in known
+    proportions (20 sigma^2 + 6 q and -15 sigma^2 - 4 q; a smooth signal enters only
+    through its third derivative). A held input that changes every row puts a kink into the
+    velocities at every row, a random walk at the sample scale: read as noise (by the spread
+    of the sixth differences alone) it bought clean logs a span that bent them. A clean log
+    keeps its rows (span 0); a slow noisy state takes a wide span, a fast one a narrow one.
+    """
+    n = units[0].x.shape[1]
+    third = [np.diff(u.x, 3, axis=0) for u in units if len(u) > 4]
+    rows = sum(len(d) for d in third)
+    if rows < MIN_SPAN_ROWS:
+        return np.zeros(n, dtype=int)
+    var = sum(np.sum(d * d, axis=0) for d in third) / rows
+    cov = sum(np.sum(d[1:] * d[:-1], axis=0) for d in third) / (rows - len(third))
+    sigma2 = np.maximum(-(2.0 * var + 3.0 * cov) / 5.0, 0.0)  # solves the two moments above
+    observed = [u.observed for u in units]
+    best, best_mse = np.zeros(n, dtype=int), sigma2.copy()
+    for half in START_SPANS:
+        res = _residuals(units, observed, half)
+        if len(res) < MIN_SPAN_ROWS:
+            break
+        w0 = _quadratic_weights(half)[half]
+        bias2 = np.maximum(np.mean(res**2, axis=0) - (1.0 - w0) * sigma2, 0.0)
+        mse = bias2 + w0 * sigma2
+        better = mse < best_mse
+        best[better], best_mse[better] = half, mse[better]
+    return best
+
+
+def _residuals(units: Sequence[Trajectory], observed: list, half: int) -> np.ndarray:
+    """The logged states less their local quadratics of ``half``, at observed inner rows."""
+    pairs = zip(units, observed, strict=True)
+    parts = [(u.x - _local_quadratic(u.x, half))[seen] for u, seen in pairs]
+    res = np.concatenate(parts)
+    return res[np.isfinite(res).all(axis=1)]
+
+
+def start_states(units: Sequence[Trajectory], spans: np.ndarray) -> list[np.ndarray]:
+    """Each unit's states as prediction starts: a state's local quadratic of its span.
+
+    Rows nearer an end than the span take the widest span in :data:`START_SPANS` that fits
+    (the logged row at the very ends).
+    """
+    out = []
+    for u in units:
+        est = u.x.copy()
+        for half in START_SPANS:
+            cols = np.flatnonzero(spans >= half)
+            if not cols.size:
+                break
+            fit = _local_quadratic(u.x[:, cols], half)
+            est[:, cols] = np.where(np.isfinite(fit), fit, est[:, cols])
+        out.append(est)
+    return out
+
+
 def _rollouts(
-    rhs: Any, trajs: Sequence[Trajectory], horizon: int, max_starts: int, substeps: int = 1
+    rhs: Any,
+    trajs: Sequence[Trajectory],
+    horizon: int,
+    max_starts: int,
+    substeps: int = 1,
+    starts: Sequence[np.ndarray] | None = None,
 ) -> Any:
     """Yields (predicted, recorded, observed, which) step by step from evenly spread starts.
 
-    Starts are observed rows, up to ``max_starts`` per trajectory; the starts of every
+    Starts are observed rows, up to ``max_starts`` per trajectory, taken from ``starts``
+    (one array of states per trajectory, :func:`start_states`) where given; the starts of every
     trajectory are stepped together, one batch per step (100 logs of 1000 rows took 5 times
     as long as one log of 100 000 rows when each log was stepped on its own). A trajectory's
     starts take ``min(horizon, len - 1)`` steps; the arrays yielded hold the starts still
@@ -104,21 +199,21 @@ def _rollouts(
     have a recorded state to compare with (not a row the logger lost:
     :attr:`Trajectory.missing`).
     """
-    starts, lengths, offset = [], [], 0
+    picked, lengths, offset = [], [], 0
     for tr in trajs:
         n = len(tr)
         h_len = max(min(horizon, n - 1), 0)
         candidates = np.flatnonzero(tr.observed[: n - h_len])
         pick = np.linspace(0, candidates.size - 1, min(max_starts, candidates.size)).astype(int)
         chosen = candidates[np.unique(pick)]
-        starts.append(offset + chosen)
+        picked.append(offset + chosen)
         lengths.append(np.full(chosen.size, h_len))
         offset += n
     if not offset:
         return
-    rows = np.concatenate(starts)
+    rows = np.concatenate(picked)
     h_len = np.concatenate(lengths)
-    which = np.repeat(np.arange(len(trajs)), [len(s) for s in starts])
+    which = np.repeat(np.arange(len(trajs)), [len(s) for s in picked])
     states = np.concatenate([tr.x for tr in trajs])
     observed = np.concatenate([tr.observed for tr in trajs])
     steps = np.concatenate([np.append(np.diff(tr.t), np.nan) for tr in trajs])
@@ -128,7 +223,7 @@ def _rollouts(
     else:
         stages = [np.concatenate(parts) for parts in zip(*[_all_stages(tr) for tr in trajs],
                                                          strict=True)]  # fmt: skip
-    x = states[rows]
+    x = (np.concatenate(starts) if starts is not None else states)[rows]
     for j in range(int(h_len.max(initial=0))):
         active = h_len > j
         at = rows[active] + j
@@ -174,6 +269,7 @@ def prediction_score(
     scale: np.ndarray,
     horizon: int,
     max_starts: int = 64,
+    starts: Sequence[np.ndarray] | None = None,
 ) -> float:
     """RMS over starts, steps and states of the normalised ``horizon``-step prediction error.
 
@@ -183,13 +279,17 @@ def prediction_score(
         scale: Per-state normaliser (:func:`score_scale`).
         horizon: Steps to predict from each start.
         max_starts: Start points per trajectory (evenly spread).
+        starts: The states to start from, one array per trajectory (:func:`start_states`);
+            the logged rows when None.
 
     Returns:
         The score (inf if the prediction diverged).
     """
     total, count, k = 0.0, 0, len(held_out)
     with np.errstate(all="ignore"):
-        for x, recorded, seen, which in _rollouts(rhs, held_out, horizon, max_starts):
+        for x, recorded, seen, which in _rollouts(
+            rhs, held_out, horizon, max_starts, starts=starts
+        ):
             sq = np.where(seen, np.sum(((x - recorded) / scale) ** 2, axis=1), 0.0)
             per_log = np.bincount(which, weights=sq, minlength=k)
             size = np.bincount(which, weights=seen, minlength=k) * x.shape[1]

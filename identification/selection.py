@@ -132,6 +132,8 @@ from identification.scoring import (
     long_enough,
     prediction_score,
     score_scale,
+    start_spans,
+    start_states,
     typical_length,
     validation_units,
 )
@@ -239,6 +241,9 @@ class SelectionReport:
         timing: The shift or lag of the inputs the timing check named on the model
             (:func:`~identification.diagnostics.input_timing`; None: none).
         prewhitened_timing: The same on the prewhitened selection's model, where one ran.
+        start_spans: Per state, the half-width in rows of the local quadratic the scores'
+            predictions start from (:func:`~identification.scoring.start_spans`; 0: the
+            logged row).
     """
 
     candidates: list[Candidate]
@@ -253,6 +258,7 @@ class SelectionReport:
     ar1: float = 0.0
     timing: InputTiming | None = None
     prewhitened_timing: InputTiming | None = None
+    start_spans: dict[str, int] = field(default_factory=dict)
 
     @property
     def best(self) -> Candidate:
@@ -273,6 +279,7 @@ class SelectionReport:
                 "final_terms": self.final_terms,
                 "error_ar1": self.error_ar1,
                 "prewhitened_ar1": self.ar1,
+                "start_spans": self.start_spans,
                 "candidates": [
                     {"window": c.window, "lambda": c.lam, "n_terms": c.n_terms,
                      "score": c.mean, "se": c.se}
@@ -874,6 +881,11 @@ def _select_model(
     k = min(folds, len(units))
     fold_of = np.arange(len(units)) % k
     scale = score_scale(units, horizon)
+    spans = start_spans(units)
+    starts = start_states(units, spans)
+
+    def fold_part(items: Sequence, f: int) -> list:
+        return [item for item, fo in zip(items, fold_of, strict=True) if fo == f]
 
     # Each window's pilot starts from the previous window's (a forward-difference start only
     # for the first): its stage points are then accurate from the first pass, which keeps the
@@ -900,7 +912,7 @@ def _select_model(
         fold_eqs = np.zeros((len(lambdas), len(first.state_names)))  # folds with terms there
         for f in range(k):
             train = Gram.stack([g for g, fo in zip(unit_grams, fold_of, strict=True) if fo != f])
-            held = [u for u, fo in zip(units, fold_of, strict=True) if fo == f]
+            held, held_starts = fold_part(units, f), fold_part(starts, f)
             try:
                 fold_xis = solve_lambdas(train, grid_cfg, lambdas, names)
             except (np.linalg.LinAlgError, ValueError, FloatingPointError):
@@ -910,7 +922,8 @@ def _select_model(
             for li, xi in enumerate(fold_xis):
                 try:
                     rhs = compile_rhs(names, xi, first.state_names, first.input_names)
-                    scores[li, f] = prediction_score(rhs, held, scale, horizon)
+                    scores[li, f] = prediction_score(rhs, held, scale, horizon,
+                                                     starts=held_starts)  # fmt: skip
                 except (np.linalg.LinAlgError, ValueError, FloatingPointError):
                     scores[li, f] = np.inf
             steps.update()
@@ -938,8 +951,10 @@ def _select_model(
         f"{k}-fold cross-validation over {'trajectories' if len(trajs) >= 3 else 'blocks'}; "
         f"score = RMS of the {horizon}-step open-loop prediction error normalised by each "
         "state's scale (the smaller of its standard deviation and the error of holding it "
-        "over the horizon); chosen: the fewest terms within one standard error of "
-        f"the best mean score plus the scores' own integrator error ({resolution:.2g}); "
+        "over the horizon), each prediction started from the state's local quadratic over "
+        "the span its noise and curvature favour; chosen: the fewest terms within one "
+        "standard error of the best mean score plus the scores' own integrator error "
+        f"({resolution:.2g}); "
         "refitted on all data with the backward-elimination check; an equation replaced by a "
         "path on centred columns where that has no more terms and a penalised residual lower "
         "by the F-test's bar; each equation grown to its "
@@ -949,13 +964,13 @@ def _select_model(
         "not pass the bar against the residuals' long-run variance dropped"
     )
     report = SelectionReport(candidates, chosen, k, horizon, rule)
+    report.start_spans = dict(zip(first.state_names, (int(m) for m in spans), strict=True))
     report.warnings += data_warnings(trajs, names)
     report.warnings += [*([stamped] if stamped else []), *_cut,
                         *([outliers] if outliers else [])]  # fmt: skip
     still = lambda x, u: np.zeros_like(x)  # noqa: E731
     report.hold = float(np.mean([
-        prediction_score(still, [u for u, fo in zip(units, fold_of, strict=True) if fo == f],
-                         scale, horizon)
+        prediction_score(still, fold_part(units, f), scale, horizon, starts=fold_part(starts, f))
         for f in range(k)
     ]))  # fmt: skip
     if best.mean > POOR_FIT * report.hold:
@@ -1010,8 +1025,8 @@ def _select_model(
         report.warnings += dropped
         # a term whose near twin the other bags hold is not unsettled (its twin note says so)
         report.warnings += _weak_terms_note(xi, std, held, names, first.state_names)
-    xi, note = _predicts_as_validated(xi, models[chosen], units, scale, horizon, resolution,
-                                      names, first)  # fmt: skip
+    xi, note = _predicts_as_validated(xi, models[chosen], (units, starts), scale, horizon,
+                                      resolution, names, first)  # fmt: skip
     if note:  # the checks' model is not returned: neither its notes nor statistics apply
         report.warnings = [*report.warnings[:validated], note]
         std = prob = None
@@ -1163,7 +1178,7 @@ candidate's fit on all data (both in sample); else the candidate's fit is return
 def _predicts_as_validated(
     xi: np.ndarray,
     candidate: np.ndarray,
-    units: Sequence[Trajectory],
+    data: tuple[Sequence[Trajectory], Sequence[np.ndarray]],
     scale: np.ndarray,
     horizon: int,
     resolution: float,
@@ -1175,14 +1190,15 @@ def _predicts_as_validated(
     The refit, growth, pruning and bootstrap steps after the selection change terms that no
     fold scored. On data the library cannot hold (motor lag with the commands logged, a
     new-user trial) they grew a validated 17-term model to 44 terms that diverged on its own
-    training flights. Both are fitted on all data, so both are scored on all of it, over twice
-    the selection's horizon.
+    training flights. Both are fitted on all data, so both are scored on all of it (``data``:
+    the units and their start states), over twice the selection's horizon.
     """
+    units, starts = data
 
     def score(coefficients: np.ndarray) -> float:
         rhs = compile_rhs(names, coefficients, first.state_names, first.input_names)
         try:  # twice the horizon: the grown 47-term model of the trial held 50 steps, not 100
-            return prediction_score(rhs, units, scale, 2 * horizon)
+            return prediction_score(rhs, units, scale, 2 * horizon, starts=starts)
         except (np.linalg.LinAlgError, ValueError, FloatingPointError):
             return float("inf")
 

@@ -1291,6 +1291,56 @@ def test_score_predicts_held_out_flights_against_an_analytic_reference(tmp_path,
     assert "milliseconds" in flagged.output, flagged.output
 
 
+def test_start_states_take_the_span_each_state_s_noise_and_curvature_favour():
+    """Stein's risk estimate on signals of known truth: clean rows are kept as logged (any
+    span only bends them), also a velocity kinked at every row by a held input (a random
+    walk at the sample scale, which high differences read as noise); a slow noisy state is
+    averaged over the widest span and a faster one over a narrower one; every noisy state's
+    estimate is at least as near its truth as its rows."""
+    from identification.scoring import START_SPANS, start_spans, start_states
+
+    t = np.arange(3000) * 0.01
+    truth = np.column_stack([np.sin(0.5 * t), np.sin(5 * t), np.sin(15 * t), np.cos(8 * t)])
+    names = ("slow", "fast", "faster", "clean")
+    u = np.zeros((t.size, 1))
+    rng = np.random.default_rng(0)
+    assert np.all(start_spans([Trajectory(t, truth, u, names, ("u",))]) == 0)
+    kinked = np.cumsum(5e-3 * rng.standard_normal(t.size))  # held accelerations, no noise
+    walk = np.column_stack([kinked, 0.01 * np.cumsum(kinked)])
+    assert np.all(start_spans([Trajectory(t, walk, u, ("v", "p"), ("u",))]) == 0)
+    for sigma in (1e-3, 1e-2):
+        noisy = truth + sigma * rng.standard_normal(truth.shape) * [1, 1, 1, 0]
+        # two logs: the spans are pooled over both, each log estimated alone
+        logs = [Trajectory(t[:1500], noisy[:1500], u[:1500], names, ("u",)),
+                Trajectory(t[1500:], noisy[1500:], u[1500:], names, ("u",))]  # fmt: skip
+        spans = start_spans(logs)
+        assert spans[0] == START_SPANS[-1] >= spans[1] > spans[2] and spans[3] == 0, spans
+        est = np.concatenate(start_states(logs, spans))
+        err = np.sqrt(np.mean((est - truth) ** 2, axis=0))
+        assert np.all(err[:3] < 1.02 * sigma) and err[0] < 0.3 * sigma, (sigma, err)
+        assert err[1] < 0.5 * sigma and np.array_equal(est[:, 3], truth[:, 3])
+    assert spans[2] > 0 and err[2] < 0.6 * sigma  # at 1e-2 the fast state is averaged too
+
+
+def test_the_score_starts_from_the_given_states_of_each_log(other_clean):
+    """The exact model started from the clean states of logs carrying a fixed offset
+    ``delta`` misses every compared row by exactly ``-delta``: the score is the RMS of
+    delta / scale, whatever rows start. From the offset rows themselves it is not."""
+    from identification.experiments.truth import truth_matrix
+    from identification.features import compile_rhs
+    from identification.scoring import prediction_score, score_scale
+
+    names = planar_library()
+    exact = compile_rhs(names, truth_matrix(truth_planar(OTHER_PLANAR), PS, names), PS, PI)
+    delta = np.array([0.01, -0.02, 0.005, 0.03, -0.01, 0.02])
+    shifted = [Trajectory(c.t, c.x + delta, c.u, PS, PI) for c in other_clean]
+    scale = score_scale(shifted, 50)
+    expected = np.sqrt(np.mean((delta / scale) ** 2))
+    score = prediction_score(exact, shifted, scale, 50, starts=[c.x for c in other_clean])
+    assert score == pytest.approx(expected, rel=1e-6)
+    assert abs(prediction_score(exact, shifted, scale, 50) - expected) > 0.01 * expected
+
+
 def test_notes_on_the_data_and_the_fit_come_before_those_on_single_terms():
     """A trial's disturbed 6-DOF runs printed 32 to 43 notes, the two that questioned the
     model (misfit, logs disagree) last among near-twin notes on single terms."""
