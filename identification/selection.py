@@ -1025,8 +1025,8 @@ def _select_model(
         report.warnings += dropped
         # a term whose near twin the other bags hold is not unsettled (its twin note says so)
         report.warnings += _weak_terms_note(xi, std, held, names, first.state_names)
-    xi, note = _predicts_as_validated(xi, models[chosen], (units, starts), scale, horizon,
-                                      resolution, names, first)  # fmt: skip
+    xi, note = _predicts_as_validated(xi, models[chosen], units, scale, horizon, resolution,
+                                      names, first, starts)  # fmt: skip
     if note:  # the checks' model is not returned: neither its notes nor statistics apply
         report.warnings = [*report.warnings[:validated], note]
         std = prob = None
@@ -1178,22 +1178,23 @@ candidate's fit on all data (both in sample); else the candidate's fit is return
 def _predicts_as_validated(
     xi: np.ndarray,
     candidate: np.ndarray,
-    data: tuple[Sequence[Trajectory], Sequence[np.ndarray]],
+    units: Sequence[Trajectory],
     scale: np.ndarray,
     horizon: int,
     resolution: float,
     names: Sequence[str],
     first: Trajectory,
+    starts: Sequence[np.ndarray] | None = None,
 ) -> tuple[np.ndarray, str]:
     """The checked model, or the chosen candidate's fit where the checks broke its predictions.
 
     The refit, growth, pruning and bootstrap steps after the selection change terms that no
     fold scored. On data the library cannot hold (motor lag with the commands logged, a
     new-user trial) they grew a validated 17-term model to 44 terms that diverged on its own
-    training flights. Both are fitted on all data, so both are scored on all of it (``data``:
-    the units and their start states), over twice the selection's horizon.
+    training flights. Both are fitted on all data, so both are scored on all of it (from
+    ``starts``, the units' start states: :func:`~identification.scoring.start_states`), over
+    twice the selection's horizon.
     """
-    units, starts = data
 
     def score(coefficients: np.ndarray) -> float:
         rhs = compile_rhs(names, coefficients, first.state_names, first.input_names)
