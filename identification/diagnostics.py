@@ -31,7 +31,7 @@ from identification.fit import (
     iter_rows,
 )
 from identification.model import IdentifiedModel
-from identification.scoring import MIN_UNIT_ROWS, long_enough
+from identification.scoring import MIN_UNIT_ROWS, long_enough, spread_blocks
 from identification.support import residual_variance, significance_bar
 
 MISFIT_WINDOW, MISFIT_SHRINK, MISFIT_FLOOR = 16, 1.5, 1e-5
@@ -413,26 +413,6 @@ ROUNDOFF_SHARE = 1e-9
 SHIFT_ROWS = 20_000
 """Rows the shift checks refit on at most (evenly spread blocks of more data): a 6-DOF log of
 1e5 rows spent 30 of its 130 s refitting each state and input shift on all of them."""
-
-
-def spread_blocks(trajs: Sequence[Trajectory], rows: int, block: int = 2000) -> list[Trajectory]:
-    """Blocks of ``block`` rows spread evenly over the data, about ``rows`` rows in all.
-
-    All of the data where it holds no more; else every trajectory cut into blocks (a last
-    one under a quarter of a block left out) and an evenly spaced choice of them, so that
-    each log and each part of a long one is represented. Data in pieces all shorter than
-    that (a long noisy log cut around its rows at rest) give about ``rows`` rows of them.
-    """
-    total = sum(len(t) for t in trajs)
-    if total <= rows:
-        return list(trajs)
-    parts = [t.slice(a, min(a + block, len(t))) for t in trajs for a in range(0, len(t), block)]
-    long = [p for p in parts if len(p) > block // 4]
-    # (a 1e5-row log at sigma = 1e-2 cut around its still blocks left none: an IndexError)
-    count = max(rows // block, 1) if long else max(rows * len(parts) // total, 1)
-    parts = long or parts
-    picks = np.unique(np.linspace(0, len(parts) - 1, count).round().astype(int))
-    return [parts[i] for i in picks]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -435,7 +435,8 @@ def test_a_state_column_that_lags_the_others_is_named_and_not_blamed_on_the_inpu
     assert "y_dot taken 2 row(s) later" in state_shift_note(lagged, names, w, xi, ratio)
     # more data than the checks refit on (SHIFT_ROWS): blocks spread over every log, the
     # same lag named
-    from identification.diagnostics import SHIFT_ROWS, spread_blocks
+    from identification.diagnostics import SHIFT_ROWS
+    from identification.scoring import spread_blocks
 
     many = [t.slice(0, len(t)) for _ in range(14) for t in lagged]  # 42 logs, 24,948 rows
     assert sum(map(len, many)) > SHIFT_ROWS

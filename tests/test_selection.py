@@ -1322,6 +1322,29 @@ def test_start_states_take_the_span_each_state_s_noise_and_curvature_favour():
     assert spans[2] > 0 and err[2] < 0.6 * sigma  # at 1e-2 the fast state is averaged too
 
 
+def test_start_states_are_least_squares_quadratics_and_narrow_near_the_ends():
+    """Against numpy's polyfit at every row: the quadratic over the state's span, or near an
+    end (and on logs shorter than two spans) over the widest span that fits there."""
+    from identification.scoring import START_SPANS, start_states
+
+    rng = np.random.default_rng(3)
+    spans = np.array([20, 5, 0, 3])
+    for n in (12, 45, 200):
+        t = np.arange(n) * 0.01
+        x = np.cumsum(rng.standard_normal((n, 4)), axis=0)
+        est = start_states([Trajectory(t, x, np.zeros((n, 1)), tuple("abcd"), ("u",))],
+                           spans)[0]  # fmt: skip
+        for k in range(n):
+            for c, span in enumerate(spans):
+                fits = [m for m in START_SPANS if m <= min(span, k, n - 1 - k)]
+                if not fits:
+                    assert est[k, c] == x[k, c]
+                    continue
+                m = fits[-1]
+                coef = np.polyfit(t[k - m : k + m + 1] - t[k], x[k - m : k + m + 1, c], 2)
+                assert est[k, c] == pytest.approx(coef[-1], abs=1e-9), (n, k, c)
+
+
 def test_the_score_starts_from_the_given_states_of_each_log(other_clean):
     """The exact model started from the clean states of logs carrying a fixed offset
     ``delta`` misses every compared row by exactly ``-delta``: the score is the RMS of
