@@ -107,6 +107,7 @@ from identification.diagnostics import (
     outlying_steps,
     position_terms_note,
     refined_lag,
+    saturation_note,
     stamp_jitter,
     state_bias_note,
     state_shift_note,
@@ -1079,6 +1080,9 @@ def _select_model(
         if flagged:
             note = outlier_note(trajs, flagged, False)
             report.warnings.append(f"after cutting, still: {note}" if _cut else note)
+    saturated = saturation_note(used, names, xi)
+    if saturated:
+        report.warnings.append(saturated)
     named = any("robust deviations" in w for w in report.warnings)
     misfit = misfit_note(used, names, base.derivative, xi, outliers=named)
     if misfit:

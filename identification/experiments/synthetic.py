@@ -78,6 +78,8 @@ class FlightSpec:
         seed: Random seed.
         lag: Time constant [s] of a first-order lag the actuators follow the (saturated)
             commands through, integrated with the states; the commands are logged (0: none).
+        log_commands: Log the commands before the rotors' limits clip them (a logger that
+            records what the controller sent) instead of the applied inputs.
     """
 
     flights: int = 3
@@ -90,6 +92,7 @@ class FlightSpec:
     drag: float = 0.0
     seed: int = 0
     lag: float = 0.0
+    log_commands: bool = False
 
     def __post_init__(self) -> None:
         if self.integrator not in INTEGRATORS:
@@ -205,17 +208,19 @@ def _fly(
     n, size = spec.steps, x0.size
     states = np.empty((n, size))
     applied = np.empty((n, noise.shape[1]))
+    logged = np.empty_like(applied) if spec.log_commands else applied
     x = x0
     if spec.lag > 0:
         rhs = _actuated(rhs, size, spec.lag)
     for k in range(n):
         states[k] = x[:size]
         command = controller(x[:size], refs[k]) if controller is not None else open_u[k]
-        applied[k] = saturate(command + noise[k])
+        logged[k] = command + noise[k]
+        applied[k] = saturate(logged[k])
         if spec.lag > 0 and k == 0:  # the actuators start at the first command
             x = np.concatenate([x, applied[0]])
         x = _step(rhs, x, applied[k], spec.dt, spec.integrator)
-    return states, applied
+    return states, logged
 
 
 def planar_flights(
