@@ -620,10 +620,34 @@ def input_directions(m: int) -> np.ndarray:
     return drawn / np.linalg.norm(drawn, axis=1, keepdims=True)
 
 
-def saturation_note(
+@dataclasses.dataclass(frozen=True)
+class Saturation:
+    """What :func:`input_saturation` found: its note, and where the hinge starts.
+
+    Attributes:
+        note: The warning.
+        weights: The combination of the logged inputs along which the response flattens.
+        limit: The value of ``weights @ u`` beyond which it does.
+    """
+
+    note: str
+    weights: np.ndarray
+    limit: float
+
+    def flagged(self, trajs: Sequence[Trajectory]) -> dict[int, np.ndarray]:
+        """The steps beyond the limit, every state, as :func:`outlying_steps` gives steps."""
+        out = {}
+        for i, tr in enumerate(trajs):
+            beyond = tr.u[_step_rows(tr)] @ self.weights > self.limit
+            if beyond.any():
+                out[i] = np.repeat(beyond[:, None], len(tr.state_names), axis=1)
+        return out
+
+
+def input_saturation(
     trajs: Sequence[Trajectory], names: Sequence[str], xi: np.ndarray
-) -> str | None:
-    """Names a direction of the inputs beyond whose extremes the states respond less.
+) -> Saturation | None:
+    """A direction of the inputs beyond whose extremes the states respond less, or None.
 
     Commands that the actuators clip (a rotor at its limit) act less than logged on the rows
     beyond the limit; with sensor noise no single step stands out (:func:`outlying_steps`)
@@ -635,7 +659,7 @@ def saturation_note(
     it takes the response back (its slope against the model's own mean change along ``d`` on
     the hinge's rows); the drops in residual variances, summed over the equations, must pass
     the chi-square bar at p = 0.001 over all the hinges tried, and one drop must be
-    :data:`SATURATION_FLOOR` of its target. Returns None where nothing passes.
+    :data:`SATURATION_FLOOR` of its target.
     """
     from scipy.stats import chi2
 
@@ -687,20 +711,22 @@ def saturation_note(
         if ok.any():
             k = int(np.argmax(np.where(ok, drop, -np.inf)))
             if best is None or drop[k] > best[0]:
-                best = (float(drop[k]), share, directions[k])
+                start = float(np.quantile(along[:, k], share))
+                best = (float(drop[k]), share, directions[k], start)
     if best is None:
         return None
-    drop, share, d = best
+    drop, share, d, start = best
     weights = d / spread
     combo = " ".join(f"{w / np.max(np.abs(weights)):+.2g} {n}"
                      for w, n in zip(weights, trajs[0].input_names, strict=True))  # fmt: skip
-    return (
+    note = (
         f"the states respond less to the inputs beyond their extremes: along {combo}, the "
         f"top {1 - share:.0%} of the rows leave a hinge in the residuals ({drop:.0f} "
         f"residual variances against the bar of {bar:.0f}): commands beyond what the "
-        "actuators give (a rotor at its limit) were logged; the model bends to them. Log "
-        "the applied inputs, or cut the rows where a rotor saturates"
+        "actuators give (a rotor at its limit) were logged, and the model bends to them; "
+        "log the applied inputs"
     )
+    return Saturation(note, weights, start + float(weights @ inputs.mean(axis=0)))
 
 
 def _input_jacobian(

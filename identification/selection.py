@@ -100,6 +100,7 @@ from identification.diagnostics import (
     empty_equation_note,
     equation_error_ar1,
     held_blocks,
+    input_saturation,
     input_timing,
     kinematic_input_note,
     misfit_note,
@@ -107,7 +108,6 @@ from identification.diagnostics import (
     outlying_steps,
     position_terms_note,
     refined_lag,
-    saturation_note,
     stamp_jitter,
     state_bias_note,
     state_shift_note,
@@ -154,6 +154,10 @@ from identification.support import (
     unsplit_twins,
 )
 from quad_envs.fileio import jsonable
+
+SATURATION_CUTS = 4
+"""Hinges :func:`select_model` cuts out at most with ``drop_outliers`` (one per limit of a
+planar vehicle's two rotors)."""
 
 SELECT_LAMBDAS: tuple[float, ...] = tuple(float(v) for v in np.logspace(-6, 0, 13))
 """Scaled thresholds tried by default (half decades from 1e-6 to 1)."""
@@ -1080,9 +1084,27 @@ def _select_model(
         if flagged:
             note = outlier_note(trajs, flagged, False)
             report.warnings.append(f"after cutting, still: {note}" if _cut else note)
-    saturated = saturation_note(used, names, xi)
-    if saturated:
-        report.warnings.append(saturated)
+    saturation = input_saturation(used, names, xi)
+    if saturation:
+        beyond = saturation.flagged(trajs)
+        steps = int(sum(f.any(axis=1).sum() for f in beyond.values()))
+        hinges = sum("beyond the hinge where" in note for note in _cut)
+        cut = drop_outliers and hinges < SATURATION_CUTS
+        kept, lost = cut_steps(trajs, beyond) if cut else ([], 0)
+        if kept:  # cut the steps beyond the hinge and select again (another rotor may clip)
+            short = f"; {lost} rows in pieces too short to keep" if lost else ""
+            done = (*_cut, *([outliers] if outliers else []),
+                    f"cut out before selecting: {steps} steps beyond the hinge where "
+                    f"{saturation.note}{short}")  # fmt: skip
+            return _select_model(
+                kept, names, config=config, lambdas=lambdas, windows=asked, folds=folds,
+                horizon=horizon_asked, n_models=n_models, seed=seed, system=system,
+                progress=progress, drop_outliers=True, _cut=done, _ar1=_ar1,
+            )  # fmt: skip
+        report.warnings.append(
+            f"{saturation.note} (or --drop-outliers, drop_outliers=True, cuts the {steps} "
+            "steps beyond the hinge out)"
+        )
     named = any("robust deviations" in w for w in report.warnings)
     misfit = misfit_note(used, names, base.derivative, xi, outliers=named)
     if misfit:
