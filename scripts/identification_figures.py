@@ -7,6 +7,7 @@ Prints one row per case: data, selection time, chosen window/lambda, support aga
 """
 
 import argparse
+import dataclasses
 import time
 import warnings
 
@@ -36,6 +37,7 @@ from identification.experiments.synthetic import (
 from identification.fit import FitConfig
 from identification.libraries import planar_library, quad6dof_library
 from identification.selection import select_model
+from quad_envs.dynamics import saturate_planar
 from quad_envs.params import PlanarQuadParams
 
 
@@ -145,6 +147,12 @@ def main() -> None:
         "(prewhitened where the errors are correlated), over this many seeds",
     )
     parser.add_argument(
+        "--saturation",
+        action="store_true",
+        help="instead: planar flights whose commands were logged where the rotors clipped them, "
+        "as logged and with drop_outliers",
+    )
+    parser.add_argument(
         "--long-log",
         action="store_true",
         help="instead: one planar log of 1e5 rows, clean and at sigma = 1e-3 and 1e-2",
@@ -168,6 +176,9 @@ def main() -> None:
         return
     if args.long_log:
         long_log(config)
+        return
+    if args.saturation:
+        saturation(config)
         return
     if args.sweep:
         sweep(args.sweep, config)
@@ -565,6 +576,42 @@ def many_logs(config: FitConfig) -> None:
         seconds = time.perf_counter() - t0
         print(f"| {label} | {sum(len(t) for t in data)} | {seconds:.1f} | {model.n_terms} | "
               f"w={report.best.window} lam={report.best.lam:.1e} |", flush=True)  # fmt: skip
+
+
+def saturation(config: FitConfig) -> None:
+    """Commands logged where the rotors clipped them (docs, "Commands beyond the actuators'
+    limits"): the light vehicle with 15 % and 25 % thrust margin per rotor, kept as logged
+    (the note only) and with ``drop_outliers`` (the steps beyond each hinge cut). The 1 s
+    error is on three unclipped flights it never saw."""
+    print("| margin, sigma, seed | clipped rows | as logged: terms, off, 1 s, named | "
+          "drop_outliers: terms, off, 1 s, hinges cut |")  # fmt: skip
+    print("|---|---|---|---|")
+    for margin, excitation in ((1.15, 0.05), (1.25, 0.1)):
+        force = margin * OTHER_PLANAR.mass * OTHER_PLANAR.gravity / 2
+        params = dataclasses.replace(OTHER_PLANAR, rotor_force_max=force)
+        unseen = planar_flights(params, FlightSpec(seed=11, tilt=0.2))
+        for sigma in (1e-3, 1e-2):
+            for seed in (0, 5, 6):
+                spec = FlightSpec(seed=seed, tilt=0.3, excitation=excitation, log_commands=True)
+                data = add_noise(planar_flights(params, spec), sigma, seed=50)
+                logged = np.concatenate([t.u for t in data])
+                clipped = np.any(np.abs(saturate_planar(logged, params) - logged) > 1e-9, axis=1)
+                cells = []
+                for drop in (False, True):
+                    try:
+                        model, report = select_model(data, planar_library(), config=config,
+                                                     drop_outliers=drop)  # fmt: skip
+                    except ValueError:
+                        cells.append("refused")
+                        continue
+                    check = check_support(model, truth_planar(params))
+                    said = (sum("beyond the hinge where" in w for w in report.warnings) if drop
+                            else any("respond less to the inputs" in w
+                                     for w in report.warnings))  # fmt: skip
+                    cells.append(f"{check.n_terms}, {check.off}, "
+                                 f"{sim_error_1s(model, unseen):.1%}, {said}")  # fmt: skip
+                print(f"| {margin}, {sigma:g}, {seed} | {clipped.mean():.1%} | {cells[0]} | "
+                      f"{cells[1]} |", flush=True)  # fmt: skip
 
 
 def long_log(config: FitConfig) -> None:
