@@ -596,7 +596,7 @@ def _driven(trajs: Sequence[Trajectory], names: Sequence[str], xi: np.ndarray) -
 
 
 SATURATION_SHARES = (0.9, 0.95, 0.98, 0.99)
-"""Shares of the rows below the thresholds of the hinges :func:`saturation_note` tries."""
+"""Shares of the rows below the thresholds of the hinges :func:`input_saturation` tries."""
 
 SATURATION_FLOOR = 1e-3
 """A hinge must lower an equation's residual by this share of its target's sum of squares on

@@ -1102,9 +1102,10 @@ def _select_model(
                 progress=progress, drop_outliers=True, _cut=done, _ar1=_ar1,
             )  # fmt: skip
         report.warnings.append(
+            f"after cutting {hinges} hinge(s), still: {saturation.note}" if hinges else
             f"{saturation.note} (or --drop-outliers, drop_outliers=True, cuts the {steps} "
             "steps beyond the hinge out)"
-        )
+        )  # fmt: skip
     named = any("robust deviations" in w for w in report.warnings)
     misfit = misfit_note(used, names, base.derivative, xi, outliers=named)
     if misfit:

@@ -536,12 +536,11 @@ def lags(config):
             for input_lag in (0.0, None):
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", IdentificationWarning)
-                    try:
-                        model, _ = select_model(data, planar_library(), config=config,
-                                                input_lag=input_lag)  # fmt: skip
-                    except ValueError:
-                        cells.append("refused")
-                        continue
+                    selected = _planar_or_refused(data, config, input_lag=input_lag)
+                if selected is None:
+                    cells.append("refused")
+                    continue
+                model = selected[0]
                 fitted = model.meta.get("input_lag", 0.0)
                 check = check_support(model, truth)
                 logs = [t.lag_inputs(fitted) for t in held] if fitted else held
@@ -578,6 +577,14 @@ def many_logs(config: FitConfig) -> None:
               f"w={report.best.window} lam={report.best.lam:.1e} |", flush=True)  # fmt: skip
 
 
+def _planar_or_refused(data, config: FitConfig, **settings):
+    """:func:`select_model` on the planar library, or None where it refuses the data."""
+    try:
+        return select_model(data, planar_library(), config=config, **settings)
+    except ValueError:
+        return None
+
+
 def saturation(config: FitConfig) -> None:
     """Commands logged where the rotors clipped them (docs, "Commands beyond the actuators'
     limits"): the light vehicle with 15 % and 25 % thrust margin per rotor, kept as logged
@@ -598,12 +605,11 @@ def saturation(config: FitConfig) -> None:
                 clipped = np.any(np.abs(saturate_planar(logged, params) - logged) > 1e-9, axis=1)
                 cells = []
                 for drop in (False, True):
-                    try:
-                        model, report = select_model(data, planar_library(), config=config,
-                                                     drop_outliers=drop)  # fmt: skip
-                    except ValueError:
+                    selected = _planar_or_refused(data, config, drop_outliers=drop)
+                    if selected is None:
                         cells.append("refused")
                         continue
+                    model, report = selected
                     check = check_support(model, truth_planar(params))
                     said = (sum("beyond the hinge where" in w for w in report.warnings) if drop
                             else any("respond less to the inputs" in w
