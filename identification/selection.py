@@ -431,7 +431,9 @@ def select_model(
         drop_outliers: Cut out the steps whose residual stands out of their neighbours'
             (:func:`outlying_steps`) before selecting, under a fit of the whole library; and
             where the selected model's own residuals show more, cut those too and select
-            once more. By default they are only reported.
+            once more; cut the steps beyond a hinge where the states respond less to extreme
+            inputs (:func:`~identification.diagnostics.input_saturation`) and select again,
+            up to :data:`SATURATION_CUTS` times. By default they are only reported.
         prewhiten: Whether to prewhiten the rows for equation errors correlated in time
             (:data:`identification.fit.AR1`; window 1). None (default): where the plain
             model's window-1 residuals are (:func:`equation_error_ar1`), a prewhitened
