@@ -734,7 +734,9 @@ def _input_jacobian(
     inputs: np.ndarray, spread: np.ndarray,
 ) -> np.ndarray:  # fmt: skip
     """The rows' derivatives of the equations ``xi`` by each input, (rows, equations, inputs)."""
-    theta = compile_features(names, first.state_names, first.input_names)
+    used = np.flatnonzero(np.any(xi != 0, axis=0))  # the equations' own terms only
+    xi = xi[:, used]
+    theta = compile_features([names[j] for j in used], first.state_names, first.input_names)
     base = theta(states, inputs) @ xi.T
     out = np.empty((len(inputs), xi.shape[0], inputs.shape[1]))
     for j, step in enumerate(1e-6 * spread):

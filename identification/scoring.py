@@ -164,10 +164,9 @@ def start_spans(units: Sequence[Trajectory]) -> np.ndarray:
     var = sum(np.sum(d * d, axis=0) for d in third) / rows
     cov = sum(np.sum(d[1:] * d[:-1], axis=0) for d in third) / (rows - len(third))
     sigma2 = np.maximum(-(2.0 * var + 3.0 * cov) / 5.0, 0.0)  # solves the two moments above
-    observed = [u.observed for u in units]
     best, best_mse = np.zeros(n, dtype=int), sigma2.copy()
     for half in START_SPANS:
-        res = _residuals(units, observed, half)
+        res = _residuals(units, half)
         if len(res) < MIN_SPAN_ROWS:
             break
         w0 = _quadratic_weights(half)[half]
@@ -178,11 +177,9 @@ def start_spans(units: Sequence[Trajectory]) -> np.ndarray:
     return best
 
 
-def _residuals(units: Sequence[Trajectory], observed: list, half: int) -> np.ndarray:
+def _residuals(units: Sequence[Trajectory], half: int) -> np.ndarray:
     """The logged states less their local quadratics of ``half``, at observed inner rows."""
-    pairs = zip(units, observed, strict=True)
-    parts = [(u.x - _local_quadratic(u.x, half))[seen] for u, seen in pairs]
-    res = np.concatenate(parts)
+    res = np.concatenate([(u.x - _local_quadratic(u.x, half))[u.observed] for u in units])
     return res[np.isfinite(res).all(axis=1)]
 
 

@@ -1069,6 +1069,16 @@ def _select_model(
     placed = position_terms_note(used, names, xi) if _is_vehicle(system) else None
     if placed:
         report.warnings.append(placed)
+
+    def again(kept: list[Trajectory], cut: str, cut_more: bool) -> tuple:
+        """The selection once more on the pieces left by a cut, the cut's note carried."""
+        return _select_model(
+            kept, names, config=config, lambdas=lambdas, windows=asked, folds=folds,
+            horizon=horizon_asked, n_models=n_models, seed=seed, system=system,
+            progress=progress, drop_outliers=cut_more,
+            _cut=(*_cut, *([outliers] if outliers else []), cut), _ar1=_ar1,
+        )  # fmt: skip
+
     if base.derivative in ("rk4", "forward"):
         # The returned model's own residuals: sparse, it cannot bend to bad steps as a fit of
         # the whole library does (4 % of the steps with a wrong input hid from such a fit).
@@ -1076,13 +1086,7 @@ def _select_model(
         if flagged and drop_outliers:  # cut these too and select once more
             kept, lost = cut_steps(trajs, flagged)
             if kept:
-                done = (*_cut, *([outliers] if outliers else []),
-                        outlier_note(trajs, flagged, True, lost))  # fmt: skip
-                return _select_model(
-                    kept, names, config=config, lambdas=lambdas, windows=asked, folds=folds,
-                    horizon=horizon_asked, n_models=n_models, seed=seed, system=system,
-                    progress=progress, drop_outliers=False, _cut=done, _ar1=_ar1,
-                )  # fmt: skip
+                return again(kept, outlier_note(trajs, flagged, True, lost), cut_more=False)
         if flagged:
             note = outlier_note(trajs, flagged, False)
             report.warnings.append(f"after cutting, still: {note}" if _cut else note)
@@ -1095,14 +1099,8 @@ def _select_model(
         kept, lost = cut_steps(trajs, beyond) if cut else ([], 0)
         if kept:  # cut the steps beyond the hinge and select again (another rotor may clip)
             short = f"; {lost} rows in pieces too short to keep" if lost else ""
-            done = (*_cut, *([outliers] if outliers else []),
-                    f"cut out before selecting: {steps} steps beyond the hinge where "
-                    f"{saturation.note}{short}")  # fmt: skip
-            return _select_model(
-                kept, names, config=config, lambdas=lambdas, windows=asked, folds=folds,
-                horizon=horizon_asked, n_models=n_models, seed=seed, system=system,
-                progress=progress, drop_outliers=True, _cut=done, _ar1=_ar1,
-            )  # fmt: skip
+            return again(kept, f"cut out before selecting: {steps} steps beyond the hinge "
+                               f"where {saturation.note}{short}", cut_more=True)  # fmt: skip
         report.warnings.append(
             f"after cutting {hinges} hinge(s), still: {saturation.note}" if hinges else
             f"{saturation.note} (or --drop-outliers, drop_outliers=True, cuts the {steps} "
