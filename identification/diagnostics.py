@@ -676,7 +676,8 @@ def input_saturation(
     if len(inputs) != len(y):
         return None
     spread = inputs.std(axis=0)
-    if len(y) < 10 * len(names) or np.any(spread <= 0):
+    own_terms = np.count_nonzero(np.any(xi[driven] != 0, axis=0))
+    if len(y) < 10 * own_terms or np.any(spread <= 0):
         return None
     directions = input_directions(inputs.shape[1])
     along = ((inputs - inputs.mean(axis=0)) / spread) @ directions.T
