@@ -825,11 +825,13 @@ def _select_model(
     drop_outliers: bool,
     _cut: tuple[str, ...] = (),
     _ar1: float = 0.0,
+    _outliers: bool = True,
 ) -> tuple[IdentifiedModel, SelectionReport]:
     """:func:`select_model` on one formulation; its notes are in the report, not yet issued.
 
     ``_ar1``: prewhitened rows at window 1; ``_cut``: the notes of steps already cut (the
-    second selection of ``drop_outliers``).
+    second selection of ``drop_outliers``); ``_outliers``: False once the model's outlying
+    steps were cut (``drop_outliers`` then cuts only the hinges of saturated inputs).
     """
     from tqdm import tqdm
 
@@ -865,7 +867,7 @@ def _select_model(
         raise ValueError(
             f"drop_outliers works with the rk4 and forward formulations, not {base.derivative!r}"
         )
-    if drop_outliers:
+    if drop_outliers and _outliers:
         cfg = dataclasses.replace(base, lam=pilot_lam, window=1, iterations=2, full_path=True)
         flagged = outlying_steps(trajs, names, base.derivative,
                                  fit_coefficients(trajs, names, cfg))  # fmt: skip
@@ -1070,12 +1072,12 @@ def _select_model(
     if placed:
         report.warnings.append(placed)
 
-    def again(kept: list[Trajectory], cut: str, cut_more: bool) -> tuple:
+    def again(kept: list[Trajectory], cut: str, outliers_again: bool) -> tuple:
         """The selection once more on the pieces left by a cut, the cut's note carried."""
         return _select_model(
             kept, names, config=config, lambdas=lambdas, windows=asked, folds=folds,
             horizon=horizon_asked, n_models=n_models, seed=seed, system=system,
-            progress=progress, drop_outliers=cut_more,
+            progress=progress, drop_outliers=True, _outliers=outliers_again,
             _cut=(*_cut, *([outliers] if outliers else []), cut), _ar1=_ar1,
         )  # fmt: skip
 
@@ -1083,10 +1085,10 @@ def _select_model(
         # The returned model's own residuals: sparse, it cannot bend to bad steps as a fit of
         # the whole library does (4 % of the steps with a wrong input hid from such a fit).
         flagged = outlying_steps(trajs, names, base.derivative, xi)
-        if flagged and drop_outliers:  # cut these too and select once more
+        if flagged and drop_outliers and _outliers:  # cut these too and select once more
             kept, lost = cut_steps(trajs, flagged)
-            if kept:
-                return again(kept, outlier_note(trajs, flagged, True, lost), cut_more=False)
+            if kept:  # (the steps beyond a saturated input's hinge may still be cut there)
+                return again(kept, outlier_note(trajs, flagged, True, lost), outliers_again=False)
         if flagged:
             note = outlier_note(trajs, flagged, False)
             report.warnings.append(f"after cutting, still: {note}" if _cut else note)
@@ -1100,7 +1102,7 @@ def _select_model(
         if kept:  # cut the steps beyond the hinge and select again (another rotor may clip)
             short = f"; {lost} rows in pieces too short to keep" if lost else ""
             return again(kept, f"cut out before selecting: {steps} steps beyond the hinge "
-                               f"where {saturation.note}{short}", cut_more=True)  # fmt: skip
+                               f"where {saturation.note}{short}", outliers_again=True)  # fmt: skip
         report.warnings.append(
             f"after cutting {hinges} hinge(s), still: {saturation.note}" if hinges else
             f"{saturation.note} (or --drop-outliers, drop_outliers=True, cuts the {steps} "
