@@ -37,7 +37,7 @@ from identification.experiments.synthetic import (
 from identification.fit import FitConfig
 from identification.libraries import planar_library, quad6dof_library
 from identification.selection import select_model
-from quad_envs.dynamics import saturate_planar
+from quad_envs.dynamics import saturate_planar, saturate_quad6dof
 from quad_envs.params import PlanarQuadParams
 
 
@@ -153,6 +153,11 @@ def main() -> None:
         "as logged and with drop_outliers",
     )
     parser.add_argument(
+        "--saturation6",
+        action="store_true",
+        help="instead: the same for 6-DOF flights (about 25 minutes)",
+    )
+    parser.add_argument(
         "--long-log",
         action="store_true",
         help="instead: one planar log of 1e5 rows, clean and at sigma = 1e-3 and 1e-2",
@@ -179,6 +184,9 @@ def main() -> None:
         return
     if args.saturation:
         saturation(config)
+        return
+    if args.saturation6:
+        saturation(config, "6dof")
         return
     if args.sweep:
         sweep(args.sweep, config)
@@ -536,7 +544,9 @@ def lags(config):
             for input_lag in (0.0, None):
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", IdentificationWarning)
-                    selected = _planar_or_refused(data, config, input_lag=input_lag)
+                    selected = _selected_or_refused(
+                        data, planar_library(), config, input_lag=input_lag
+                    )
                 if selected is None:
                     cells.append("refused")
                     continue
@@ -577,47 +587,92 @@ def many_logs(config: FitConfig) -> None:
               f"w={report.best.window} lam={report.best.lam:.1e} |", flush=True)  # fmt: skip
 
 
-def _planar_or_refused(data, config: FitConfig, **settings):
-    """:func:`select_model` on the planar library, or None where it refuses the data."""
+def _selected_or_refused(data, library, config: FitConfig, **settings):
+    """:func:`select_model` on ``library``, or None where it refuses the data."""
     try:
-        return select_model(data, planar_library(), config=config, **settings)
+        return select_model(data, library, config=config, **settings)
     except ValueError:
         return None
 
 
-def saturation(config: FitConfig) -> None:
+@dataclasses.dataclass(frozen=True)
+class SaturationRuns:
+    """The flights of :func:`saturation` for one kind of vehicle.
+
+    Attributes:
+        vehicle: The vehicle, whose rotors get less thrust.
+        margins: (thrust per rotor as a multiple of its hover share, input excitation) pairs.
+        rotors: Rotors sharing the hover thrust.
+        flights: Flights per run.
+        tilt: Target tilt amplitude [rad].
+        sigmas: State noise levels.
+        seeds: Seeds of the flights.
+        unseen_seed: Seed of the flights the 1 s error is measured on.
+    """
+
+    vehicle: object
+    margins: tuple
+    rotors: int
+    flights: int
+    tilt: float
+    sigmas: tuple = (1e-3, 1e-2)
+    seeds: tuple = (0, 5, 6)
+    unseen_seed: int = 11
+
+
+SATURATION_RUNS = {
+    "planar": SaturationRuns(OTHER_PLANAR, ((1.15, 0.05), (1.25, 0.1)), 2, 3, 0.3),
+    "6dof": SaturationRuns(
+        OTHER_6DOF, ((1.8, 0.05), (2.0, 0.05)), 4, 4, 0.2, seeds=(0, 5), unseen_seed=13
+    ),
+}
+"""The 6-DOF vehicle tumbles at tilt 0.3 with these margins (and at 1.8 with seeds 1, 11 and
+12); 2.0 is its own margin (it clips 1.2 % of the rows logged as commanded)."""
+
+
+def saturation(config: FitConfig, kind: str = "planar") -> None:
     """Commands logged where the rotors clipped them (docs, "Commands beyond the actuators'
-    limits"): the light vehicle with 15 % and 25 % thrust margin per rotor, kept as logged
-    (the note only) and with ``drop_outliers`` (the steps beyond each hinge cut). The 1 s
-    error is on three unclipped flights it never saw."""
+    limits"): a vehicle with little thrust margin per rotor, kept as logged (the note only) and
+    with ``drop_outliers`` (the steps beyond each hinge cut), beside the same flights with the
+    applied inputs logged. The 1 s error is on flights with the same rotors it never saw
+    (unclipped on the planar vehicle)."""
+    runs = SATURATION_RUNS[kind]
+    if kind == "planar":
+        fly, truth, library, clip = planar_flights, truth_planar, planar_library, saturate_planar
+    else:
+        fly, truth, library = quad6dof_flights, truth_quad6dof, quad6dof_library
+        clip = saturate_quad6dof
     print("| margin, sigma, seed | clipped rows | as logged: terms, off, 1 s, named | "
-          "drop_outliers: terms, off, 1 s, hinges cut |")  # fmt: skip
-    print("|---|---|---|---|")
-    for margin, excitation in ((1.15, 0.05), (1.25, 0.1)):
-        force = margin * OTHER_PLANAR.mass * OTHER_PLANAR.gravity / 2
-        params = dataclasses.replace(OTHER_PLANAR, rotor_force_max=force)
-        unseen = planar_flights(params, FlightSpec(seed=11, tilt=0.2))
-        for sigma in (1e-3, 1e-2):
-            for seed in (0, 5, 6):
-                spec = FlightSpec(seed=seed, tilt=0.3, excitation=excitation, log_commands=True)
-                data = add_noise(planar_flights(params, spec), sigma, seed=50)
-                logged = np.concatenate([t.u for t in data])
-                clipped = np.any(np.abs(saturate_planar(logged, params) - logged) > 1e-9, axis=1)
-                cells = []
-                for drop in (False, True):
-                    selected = _planar_or_refused(data, config, drop_outliers=drop)
+          "drop_outliers: terms, off, 1 s, hinges cut | applied inputs logged: terms, off, 1 s, "
+          "named |")  # fmt: skip
+    print("|---|---|---|---|---|")
+    for margin, excitation in runs.margins:
+        force = margin * runs.vehicle.mass * runs.vehicle.gravity / runs.rotors
+        params = dataclasses.replace(runs.vehicle, rotor_force_max=force)
+        unseen = fly(params, FlightSpec(flights=runs.flights, seed=runs.unseen_seed, tilt=0.2))
+        for sigma in runs.sigmas:
+            for seed in runs.seeds:
+                cells, clipped = [], 0.0
+                for commands, drop in ((True, False), (True, True), (False, False)):
+                    spec = FlightSpec(flights=runs.flights, seed=seed, tilt=runs.tilt,
+                                      excitation=excitation, log_commands=commands)  # fmt: skip
+                    data = add_noise(fly(params, spec), sigma, seed=50)
+                    if commands:
+                        logged = np.concatenate([t.u for t in data])
+                        clipped = np.any(np.abs(clip(logged, params) - logged) > 1e-9, axis=1)
+                    selected = _selected_or_refused(data, library(), config, drop_outliers=drop)
                     if selected is None:
                         cells.append("refused")
                         continue
                     model, report = selected
-                    check = check_support(model, truth_planar(params))
+                    check = check_support(model, truth(params))
                     said = (sum("beyond the hinge where" in w for w in report.warnings) if drop
                             else any("respond less to the inputs" in w
                                      for w in report.warnings))  # fmt: skip
                     cells.append(f"{check.n_terms}, {check.off}, "
                                  f"{sim_error_1s(model, unseen):.1%}, {said}")  # fmt: skip
-                print(f"| {margin}, {sigma:g}, {seed} | {clipped.mean():.1%} | {cells[0]} | "
-                      f"{cells[1]} |", flush=True)  # fmt: skip
+                print(f"| {margin}, {sigma:g}, {seed} | {clipped.mean():.1%} | "
+                      f"{' | '.join(cells)} |", flush=True)  # fmt: skip
 
 
 def long_log(config: FitConfig) -> None:
