@@ -150,6 +150,7 @@ from identification.support import (
     residual_variance,
     resolve_collinear,
     restart_centred,
+    score_confirmation,
     significance_bar,
     unsplit_twins,
 )
@@ -1011,7 +1012,9 @@ def _select_model(
                                 (best.lam, ratio_of))  # fmt: skip
     report.warnings += notes
     ratio = ratio.copy()  # the pruning's: an equation grown by a twin takes the pair's
-    xi, notes = grow_significant(xi, final_gram, ratio, names, first.state_names, ratio_of)
+    confirm = score_confirmation(used, names, xi, best.window)
+    xi, notes = grow_significant(xi, final_gram, ratio, names, first.state_names, ratio_of,
+                                 confirm)  # fmt: skip
     report.warnings += notes
     wider = [w for w in sorted(windows) if w > best.window and long_enough(used, w)]
     if wider:
