@@ -404,8 +404,9 @@ def test_the_growth_score_test_is_a_chi_square_where_wide_windows_make_columns_s
     """Under the truth, the statistic of a term the truth lacks (``u2`` in ``z'``) over 200
     noise draws: at window 64 the RK4 rows' column and residual are both smooth, and the
     residual-variance statistic averages 1.44 (a chi-square(1) averages 1; it passed a
-    growth bar on 3 of 46 low-excitation trials). The score test on the products' long-run
-    covariance averages 1 and exceeds its 5 % point on about 5 % of the draws."""
+    growth bar on 3 of 46 low-excitation trials). The Wald test with the residual's
+    autocovariance against the column's lagged products averages 1 and exceeds its 5 % point
+    on about 5 % of the draws."""
     from identification.experiments.synthetic import FlightSpec, planar_flights
     from identification.experiments.truth import truth_matrix
     from identification.fit import iter_rows
