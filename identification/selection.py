@@ -34,7 +34,8 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
    refitted on all data (full RK4 fixed
    point). Where the greedy path stopped short holding a wrong twin, each equation's best
    support one term larger (or of the same size) within its terms' near twins and best next
-   entries is taken when the data need it (:func:`grow_significant`). Near-collinear pairs
+   entries is taken when the data need it (:func:`grow_significant`; a larger one also by a
+   Wald test on the rows with their long-run covariance, :func:`score_chi2`). Near-collinear pairs
    on the data (``1`` / ``cos(phi)``, ``u2`` / ``cos(phi) u2``:
    columns with |cosine| > 0.999, one term the other times more factors) are resolved towards
    the simpler term when an F-test on the residuals (p = 0.001, with every row an effective
