@@ -35,7 +35,7 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
    point). Where the greedy path stopped short holding a wrong twin, each equation's best
    support one term larger (or of the same size) within its terms' near twins and best next
    entries is taken when the data need it (:func:`grow_significant`; a larger one also by a
-   Wald test on the rows with their long-run covariance, :func:`score_chi2`). Near-collinear pairs
+   Wald test on the rows with their long-run covariance, :func:`wald_chi2`). Near-collinear pairs
    on the data (``1`` / ``cos(phi)``, ``u2`` / ``cos(phi) u2``:
    columns with |cosine| > 0.999, one term the other times more factors) are resolved towards
    the simpler term when an F-test on the residuals (p = 0.001, with every row an effective
@@ -151,9 +151,9 @@ from identification.support import (
     residual_variance,
     resolve_collinear,
     restart_centred,
-    score_confirmation,
     significance_bar,
     unsplit_twins,
+    wald_confirmation,
 )
 from quad_envs.fileio import jsonable
 
@@ -1013,7 +1013,7 @@ def _select_model(
                                 (best.lam, ratio_of))  # fmt: skip
     report.warnings += notes
     ratio = ratio.copy()  # the pruning's: an equation grown by a twin takes the pair's
-    confirm = score_confirmation(used, names, xi, best.window)
+    confirm = wald_confirmation(used, names, xi, best.window)
     xi, notes = grow_significant(xi, final_gram, ratio, names, first.state_names, ratio_of,
                                  confirm)  # fmt: skip
     report.warnings += notes

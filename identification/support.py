@@ -436,7 +436,7 @@ def add_reinforcing_twins(
         support = best[1]
 
 
-def score_chi2(
+def wald_chi2(
     trajs: Sequence[Trajectory],
     names: Sequence[str],
     xi: np.ndarray,
@@ -500,17 +500,17 @@ def score_chi2(
     return float(total @ solved), len(added)
 
 
-def score_confirmation(
+def wald_confirmation(
     trajs: Sequence[Trajectory], names: Sequence[str], xi: np.ndarray, window: int
 ) -> Callable[[int, Sequence[int], Sequence[int], int], bool]:
     """The ``confirm`` of :func:`grow_significant` on these rows (``xi`` for the stage points).
 
-    :func:`score_chi2` beyond the chi-square bar at :data:`PRUNE_P` over the tries.
+    :func:`wald_chi2` beyond the chi-square bar at :data:`PRUNE_P` over the tries.
     """
     from scipy.stats import chi2
 
     def confirm(i: int, support: Sequence[int], trial: Sequence[int], tries: int) -> bool:
-        stat, dof = score_chi2(trajs, names, xi, window, i, support, trial)
+        stat, dof = wald_chi2(trajs, names, xi, window, i, support, trial)
         return dof == 0 or stat > float(chi2.isf(PRUNE_P / max(tries, 1), dof))
 
     return confirm
@@ -561,7 +561,7 @@ def grow_significant(
     ratio of the support without it keeps out is measured against the pair's own ratio, and
     where that admits it, ``ratio`` (changed in place) holds the pair's ratio for the
     pruning after. With ``confirm`` (equation, support, larger support, the Bonferroni count
-    of its bar -> whether the rows' score test passes that bar: :func:`score_chi2`), a
+    of its bar -> whether the rows' Wald test passes that bar: :func:`wald_chi2`), a
     larger support must pass it too.
 
     Returns:

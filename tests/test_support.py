@@ -400,7 +400,7 @@ def test_a_twin_kept_out_by_the_ratio_of_the_residual_without_it_is_measured_by_
     assert len(asked) == 1 and np.all(asked[0] != 0)  # asked once, for the pair
 
 
-def test_the_growth_score_test_is_a_chi_square_where_wide_windows_make_columns_smooth():
+def test_the_growth_wald_test_is_a_chi_square_where_wide_windows_make_columns_smooth():
     """Under the truth, the statistic of a term the truth lacks (``u2`` in ``z'``) over 200
     noise draws: at window 64 the RK4 rows' column and residual are both smooth, and the
     residual-variance statistic averages 1.44 (a chi-square(1) averages 1; it passed a
@@ -410,7 +410,7 @@ def test_the_growth_score_test_is_a_chi_square_where_wide_windows_make_columns_s
     from identification.experiments.synthetic import FlightSpec, planar_flights
     from identification.experiments.truth import truth_matrix
     from identification.fit import iter_rows
-    from identification.support import score_chi2
+    from identification.support import wald_chi2
 
     names = planar_library()
     clean = planar_flights(OTHER_PLANAR, FlightSpec(seed=3, excitation=0.015))
@@ -419,7 +419,7 @@ def test_the_growth_score_test_is_a_chi_square_where_wide_windows_make_columns_s
     plain, score = [], []
     for seed in range(200):
         data = add_noise(clean, 3e-3, seed=seed)
-        score.append(score_chi2(data, names, xi, 64, 1, [z_dot], [z_dot, u2])[0])
+        score.append(wald_chi2(data, names, xi, 64, 1, [z_dot], [z_dot, u2])[0])
         rows = [(theta[:, [z_dot, u2]], y[:, 1]) for _, theta, y in
                 iter_rows(data, names, "rk4", 64, xi)]  # fmt: skip
         theta = np.concatenate([r[0] for r in rows])
@@ -431,4 +431,4 @@ def test_the_growth_score_test_is_a_chi_square_where_wide_windows_make_columns_s
     plain, score = np.array(plain), np.array(score)
     assert plain.mean() > 1.3 and np.mean(plain > 3.84) > 0.08, plain.mean()
     assert score.mean() == pytest.approx(1.0, abs=0.2) and np.mean(score > 3.84) < 0.08
-    assert score_chi2(data, names, xi, 64, 1, [z_dot], [z_dot]) == (0.0, 0)
+    assert wald_chi2(data, names, xi, 64, 1, [z_dot], [z_dot]) == (0.0, 0)
