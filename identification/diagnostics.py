@@ -595,13 +595,17 @@ def _driven(trajs: Sequence[Trajectory], names: Sequence[str], xi: np.ndarray) -
                    for f in parse_term(names[j], variables))]  # fmt: skip
 
 
-SATURATION_SHARES = (0.9, 0.95, 0.98, 0.99)
+SATURATION_SHARES = (0.9, 0.95, 0.98, 0.99, 0.995, 0.998)
 """Shares of the rows below the thresholds of the hinges :func:`input_saturation` tries."""
 
 SATURATION_FLOOR = 1e-3
 """A hinge must lower an equation's residual by this share of its target's sum of squares on
 top of passing the bar: on clean data the residual is truncation error, which any column
 explains "significantly"."""
+
+SATURATION_HINGES = 2
+"""Hinges :func:`input_saturation` names at most per input: a mixer of as many rotors as
+inputs, each at either limit."""
 
 
 def input_directions(m: int) -> np.ndarray:
@@ -621,24 +625,35 @@ def input_directions(m: int) -> np.ndarray:
 
 
 @dataclasses.dataclass(frozen=True)
-class Saturation:
-    """What :func:`input_saturation` found: its note, and where the hinge starts.
+class Hinge:
+    """A combination of the logged inputs beyond whose limit the states respond less.
 
     Attributes:
-        note: The warning.
-        weights: The combination of the logged inputs along which the response flattens.
-        limit: The value of ``weights @ u`` beyond which it does.
+        weights: The combination of the logged inputs.
+        limit: The value of ``weights @ u`` beyond which the response flattens.
+        share: The share of the rows beyond it.
+        drop: The residual variances it takes back, summed over the driven equations.
     """
 
-    note: str
     weights: np.ndarray
     limit: float
+    share: float
+    drop: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Saturation:
+    """What :func:`input_saturation` found: its note and its hinges, strongest first."""
+
+    note: str
+    hinges: tuple[Hinge, ...]
 
     def flagged(self, trajs: Sequence[Trajectory]) -> dict[int, np.ndarray]:
-        """The steps beyond the limit, every state, as :func:`outlying_steps` gives steps."""
+        """The steps beyond any hinge, every state, as :func:`outlying_steps` gives steps."""
         out = {}
         for i, tr in enumerate(trajs):
-            beyond = tr.u[_step_rows(tr)] @ self.weights > self.limit
+            u = tr.u[_step_rows(tr)]
+            beyond = np.any([u @ h.weights > h.limit for h in self.hinges], axis=0)
             if beyond.any():
                 out[i] = np.repeat(beyond[:, None], len(tr.state_names), axis=1)
         return out
@@ -647,7 +662,7 @@ class Saturation:
 def input_saturation(
     trajs: Sequence[Trajectory], names: Sequence[str], xi: np.ndarray
 ) -> Saturation | None:
-    """A direction of the inputs beyond whose extremes the states respond less, or None.
+    """The directions of the inputs beyond whose extremes the states respond less, or None.
 
     Commands that the actuators clip (a rotor at its limit) act less than logged on the rows
     beyond the limit; with sensor noise no single step stands out (:func:`outlying_steps`)
@@ -660,6 +675,14 @@ def input_saturation(
     the hinge's rows); the drops in residual variances, summed over the equations, must pass
     the chi-square bar at p = 0.001 over all the hinges tried, and one drop must be
     :data:`SATURATION_FLOOR` of its target.
+
+    A hinge that passes is refined: its direction and threshold move to where the drop is
+    largest (Nelder-Mead, at most the grid's widest share of the rows beyond it), since in
+    four inputs the drawn directions lie up to about 25 deg off a rotor's and cut as many
+    unclipped rows as clipped ones (a held-out trial: 40 steps beyond, 17 of them clipped).
+    The equations are then refitted with the hinges found beside their own terms and the
+    next hinge is searched the same way, up to :data:`SATURATION_HINGES` per input: every
+    rotor of a mixer may clip, at either limit.
     """
     from scipy.stats import chi2
 
@@ -680,54 +703,124 @@ def input_saturation(
     if len(y) < 10 * own_terms or np.any(spread <= 0):
         return None
     directions = input_directions(inputs.shape[1])
-    along = ((inputs - inputs.mean(axis=0)) / spread) @ directions.T
+    standardised = (inputs - inputs.mean(axis=0)) / spread
+    along = standardised @ directions.T
     bar = float(chi2.isf(PRUNE_P / (len(directions) * len(SATURATION_SHARES)), len(driven)))
     states = np.concatenate([t.x[_step_rows(t)] for t in blocks])
-    jacobian = _input_jacobian(names, trajs[0], xi[driven], states, inputs, spread)
-    own = {}
-    for i in driven:
-        basis, _ = np.linalg.qr(theta[:, np.flatnonzero(xi[i])])
-        residual = y[:, i] - basis @ (basis.T @ y[:, i])
-        own[i] = (basis, residual, float(residual @ residual), float(y[:, i] @ y[:, i]))
-    best = None
-    for share in SATURATION_SHARES:
-        hinge = np.maximum(along - np.quantile(along, share, axis=0), 0.0)
-        on = (hinge > 0).astype(float)
-        drop = np.zeros(len(directions))
-        material = np.zeros(len(directions), dtype=bool)
-        for e, i in enumerate(driven):
-            basis, residual, rss, total = own[i]
-            h = hinge - basis @ (basis.T @ hinge)
-            hh = np.maximum(np.sum(h * h, axis=0), 1e-300)
-            gain = (residual @ h) ** 2 / hh
-            # only a hinge that takes the model's response along d back counts: its slope
-            # against the model's mean change per unit step along d on the hinge's rows
-            along_d = (on.T @ jacobian[:, e, :]) * spread  # (directions, inputs)
-            response = np.sum(along_d * directions, axis=1) / np.maximum(on.sum(axis=0), 1)
-            back = (residual @ h) * response < 0.0
-            dof = max(len(y) - basis.shape[1] - 1, 1)
-            drop += np.where(back, gain / np.maximum((rss - gain) / dof, 1e-300), 0.0)
-            material |= back & (gain > SATURATION_FLOOR * total)
-        ok = (drop > bar) & material
-        if ok.any():
+    # the model's change per standardised unit of each input, (rows, equations, inputs)
+    response = _input_jacobian(names, trajs[0], xi[driven], states, inputs, spread) * spread
+    most = int((1.0 - min(SATURATION_SHARES)) * len(y))
+    found: list[Hinge] = []
+    columns: list[np.ndarray] = []
+    while len(found) < SATURATION_HINGES * inputs.shape[1]:
+        fits = _own_fits(theta, y, xi, driven, columns)
+        best = None
+        for share in SATURATION_SHARES:
+            start = np.quantile(along, share, axis=0)
+            hinges = np.maximum(along - start, 0.0)
+            drop, material = _hinge_drops(fits, hinges, directions, response)
+            ok = (drop > bar) & material
             k = int(np.argmax(np.where(ok, drop, -np.inf)))
-            if best is None or drop[k] > best[0]:
-                start = float(np.quantile(along[:, k], share))
-                best = (float(drop[k]), share, directions[k], start)
-    if best is None:
+            if ok[k] and (best is None or drop[k] > best[0]):
+                best = (float(drop[k]), directions[k], float(start[k]))
+        if best is None:
+            break
+        drop, d, c = _refined_hinge(fits, standardised, response, *best, most)
+        columns.append(np.maximum(standardised @ d - c, 0.0))
+        weights = d / spread
+        found.append(Hinge(weights, c + float(weights @ inputs.mean(axis=0)),
+                           float(np.mean(columns[-1] > 0)), drop))  # fmt: skip
+    if not found:
         return None
-    drop, share, d, start = best
-    weights = d / spread
-    combo = " ".join(f"{w / np.max(np.abs(weights)):+.2g} {n}"
-                     for w, n in zip(weights, trajs[0].input_names, strict=True))  # fmt: skip
+    first, *more = found
+    named = trajs[0].input_names
+    others = (
+        f"; {len(more)} more past it, each refitted beside those before: "
+        + ", ".join(f"{_combination(h.weights, named)} (top {h.share:.1%})" for h in more)
+        if more else ""
+    )  # fmt: skip
     note = (
-        f"the states respond less to the inputs beyond their extremes: along {combo}, the "
-        f"top {1 - share:.0%} of the rows leave a hinge in the residuals ({drop:.0f} "
-        f"residual variances against the bar of {bar:.0f}): commands beyond what the "
-        "actuators give (a rotor at its limit) were logged, and the model bends to them; "
-        "log the applied inputs"
+        f"the states respond less to the inputs beyond their extremes: along "
+        f"{_combination(first.weights, named)}, the top {first.share:.1%} of the rows leave a "
+        f"hinge in the residuals ({first.drop:.0f} residual variances against the bar of "
+        f"{bar:.0f}){others}: commands beyond what the actuators give (a rotor at its limit) "
+        "were logged, and the model bends to them; log the applied inputs"
     )
-    return Saturation(note, weights, start + float(weights @ inputs.mean(axis=0)))
+    return Saturation(note, tuple(found))
+
+
+def _own_fits(
+    theta: np.ndarray, y: np.ndarray, xi: np.ndarray, driven: list[int], columns: list
+) -> list[tuple]:
+    """Each driven equation refitted on its own terms and ``columns`` (the hinges found).
+
+    Returns (orthonormal basis, residual, its sum of squares, the target's squares, degrees
+    of freedom) per equation.
+    """
+    fits = []
+    for i in driven:
+        basis, _ = np.linalg.qr(np.column_stack([theta[:, np.flatnonzero(xi[i])], *columns]))
+        residual = y[:, i] - basis @ (basis.T @ y[:, i])
+        dof = max(len(y) - basis.shape[1] - 1, 1)
+        fits.append((basis, residual, float(residual @ residual), y[:, i] ** 2, dof))
+    return fits
+
+
+def _combination(weights: np.ndarray, names: Sequence[str]) -> str:
+    """``weights`` of the inputs ``names``, scaled to a largest of one, as a note prints them."""
+    scaled = weights / np.max(np.abs(weights))
+    return " ".join(f"{w:+.2g} {n}" for w, n in zip(scaled, names, strict=True))
+
+
+def _hinge_drops(
+    fits: list, hinges: np.ndarray, directions: np.ndarray, response: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The residual variances each hinge takes back, and whether it is material in one.
+
+    ``hinges`` (rows, k) lie along ``directions`` (k, inputs); the drops are summed over the
+    equations ``fits`` (:func:`_own_fits`).
+    """
+    on = (hinges > 0).astype(float)
+    count = np.maximum(on.sum(axis=0), 1.0)
+    drop = np.zeros(hinges.shape[1])
+    material = np.zeros(hinges.shape[1], dtype=bool)
+    for e, (basis, residual, rss, squares, dof) in enumerate(fits):
+        h = hinges - basis @ (basis.T @ hinges)
+        fit = residual @ h
+        gain = fit**2 / np.maximum(np.sum(h * h, axis=0), 1e-300)
+        # only a hinge that takes the model's response along d back counts: its slope
+        # against the model's mean change per unit step along d on the hinge's rows
+        mean_change = np.sum((on.T @ response[:, e, :]) * directions, axis=1) / count
+        back = fit * mean_change < 0.0
+        drop += np.where(back, gain / np.maximum((rss - gain) / dof, 1e-300), 0.0)
+        material |= back & (gain > SATURATION_FLOOR * (squares @ on))
+    return drop, material
+
+
+def _refined_hinge(
+    fits: list, standardised: np.ndarray, response: np.ndarray, drop: float, d: np.ndarray,
+    c: float, most: int,
+) -> tuple[float, np.ndarray, float]:  # fmt: skip
+    """The direction and threshold near ``(d, c)`` whose hinge takes back most (a drop, d, c)."""
+    from scipy.optimize import minimize
+
+    def cost(p: np.ndarray) -> float:
+        d = p[:-1] / max(float(np.linalg.norm(p[:-1])), 1e-12)
+        hinge = np.maximum(standardised @ d - p[-1], 0.0)[:, None]
+        if not 3 <= np.count_nonzero(hinge) <= most:
+            return 0.0
+        drop, material = _hinge_drops(fits, hinge, d[None, :], response)
+        return -float(drop[0]) if material[0] else 0.0
+
+    start = np.append(d, c)
+    simplex = np.vstack([start, start + 0.05 * np.eye(len(start))])
+    options = {"initial_simplex": simplex, "maxfev": 100 * len(start), "xatol": 1e-4,
+               "fatol": 1e-3}  # fmt: skip
+    found = minimize(cost, start, method="Nelder-Mead", options=options)
+    if -found.fun <= drop:
+        return drop, d, c
+    norm = float(np.linalg.norm(found.x[:-1]))
+    return float(-found.fun), found.x[:-1] / norm, float(found.x[-1])
 
 
 def _input_jacobian(

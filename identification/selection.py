@@ -158,8 +158,8 @@ from identification.support import (
 from quad_envs.fileio import jsonable
 
 SATURATION_CUTS = 4
-"""Hinges :func:`select_model` cuts out at most with ``drop_outliers`` (one per limit of a
-planar vehicle's two rotors)."""
+"""Times :func:`select_model` cuts the steps beyond the hinges it found with ``drop_outliers``
+(each time all :func:`~identification.diagnostics.input_saturation` names)."""
 
 SELECT_LAMBDAS: tuple[float, ...] = tuple(float(v) for v in np.logspace(-6, 0, 13))
 """Scaled thresholds tried by default (half decades from 1e-6 to 1)."""
@@ -433,9 +433,9 @@ def select_model(
         drop_outliers: Cut out the steps whose residual stands out of their neighbours'
             (:func:`outlying_steps`) before selecting, under a fit of the whole library; and
             where the selected model's own residuals show more, cut those too and select
-            once more; cut the steps beyond a hinge where the states respond less to extreme
-            inputs (:func:`~identification.diagnostics.input_saturation`) and select again,
-            up to :data:`SATURATION_CUTS` times. By default they are only reported.
+            once more; cut the steps beyond the hinges where the states respond less to
+            extreme inputs (:func:`~identification.diagnostics.input_saturation`) and select
+            again, up to :data:`SATURATION_CUTS` times. By default they are only reported.
         prewhiten: Whether to prewhiten the rows for equation errors correlated in time
             (:data:`identification.fit.AR1`; window 1). None (default): where the plain
             model's window-1 residuals are (:func:`equation_error_ar1`), a prewhitened
@@ -1100,17 +1100,18 @@ def _select_model(
     if saturation:
         beyond = saturation.flagged(trajs)
         steps = int(sum(f.any(axis=1).sum() for f in beyond.values()))
-        hinges = sum("beyond the hinge where" in note for note in _cut)
-        cut = drop_outliers and hinges < SATURATION_CUTS
+        times = sum("respond less to the inputs" in note for note in _cut)  # hinge cuts
+        cut = drop_outliers and times < SATURATION_CUTS
         kept, lost = cut_steps(trajs, beyond) if cut else ([], 0)
-        if kept:  # cut the steps beyond the hinge and select again (another rotor may clip)
+        hinges = "the hinge" if len(saturation.hinges) == 1 else f"{len(saturation.hinges)} hinges"
+        if kept:  # cut the steps beyond the hinges and select again (other limits may show)
             short = f"; {lost} rows in pieces too short to keep" if lost else ""
-            return again(kept, f"cut out before selecting: {steps} steps beyond the hinge "
+            return again(kept, f"cut out before selecting: {steps} steps beyond {hinges} "
                                f"where {saturation.note}{short}", outliers_again=True)  # fmt: skip
         report.warnings.append(
-            f"after cutting {hinges} hinge(s), still: {saturation.note}" if hinges else
+            f"after cutting hinges {times} time(s), still: {saturation.note}" if times else
             f"{saturation.note} (or --drop-outliers, drop_outliers=True, cuts the {steps} "
-            "steps beyond the hinge out)"
+            f"steps beyond {hinges} out)"
         )  # fmt: skip
     named = any("robust deviations" in w for w in report.warnings)
     misfit = misfit_note(used, names, base.derivative, xi, outliers=named)

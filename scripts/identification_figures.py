@@ -8,6 +8,7 @@ Prints one row per case: data, selection time, chosen window/lambda, support aga
 
 import argparse
 import dataclasses
+import re
 import time
 import warnings
 
@@ -666,13 +667,20 @@ def saturation(config: FitConfig, kind: str = "planar") -> None:
                         continue
                     model, report = selected
                     check = check_support(model, truth(params))
-                    said = (sum("beyond the hinge where" in w for w in report.warnings) if drop
+                    said = (_hinges_cut(report.warnings) if drop
                             else any("respond less to the inputs" in w
                                      for w in report.warnings))  # fmt: skip
                     cells.append(f"{check.n_terms}, {check.off}, "
                                  f"{sim_error_1s(model, unseen):.1%}, {said}")  # fmt: skip
                 print(f"| {margin}, {sigma:g}, {seed} | {clipped.mean():.1%} | "
                       f"{' | '.join(cells)} |", flush=True)  # fmt: skip
+
+
+def _hinges_cut(notes: list[str]) -> int:
+    """The hinges that the cut notes of ``drop_outliers`` name ("the hinge", "3 hinges")."""
+    cuts = [re.search(r"steps beyond (the|\d+) hinges? where", w) for w in notes
+            if w.startswith("cut out before selecting")]  # fmt: skip
+    return sum(1 if m.group(1) == "the" else int(m.group(1)) for m in cuts if m)
 
 
 def long_log(config: FitConfig) -> None:
