@@ -600,8 +600,9 @@ SATURATION_SHARES = (0.9, 0.95, 0.98, 0.99, 0.995, 0.998)
 
 SATURATION_FLOOR = 1e-3
 """A hinge must lower an equation's residual by this share of its target's sum of squares on
-top of passing the bar: on clean data the residual is truncation error, which any column
-explains "significantly"."""
+the hinge's own rows, on top of passing the bar: on clean data the residual is truncation
+error, which any column explains "significantly" (of the whole target, the few clipped steps
+left after an outlier cut never reached it)."""
 
 SATURATION_HINGES = 2
 """Hinges :func:`input_saturation` names at most per input: a mixer of as many rotors as
@@ -674,7 +675,7 @@ def input_saturation(
     it takes the response back (its slope against the model's own mean change along ``d`` on
     the hinge's rows); the drops in residual variances, summed over the equations, must pass
     the chi-square bar at p = 0.001 over all the hinges tried, and one drop must be
-    :data:`SATURATION_FLOOR` of its target.
+    :data:`SATURATION_FLOOR` of its target on the hinge's rows.
 
     A hinge that passes is refined: its direction and threshold move to where the drop is
     largest (Nelder-Mead, at most the grid's widest share of the rows beyond it), since in

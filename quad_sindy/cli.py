@@ -571,9 +571,9 @@ def identify(
         bool,
         typer.Option(
             help="cut out the steps whose residual stands out of their neighbours' (inputs "
-            "that did not act as logged, glitches), and those beyond a hinge where the states "
-            "respond less to extreme inputs (commands a rotor clipped), before selecting; by "
-            "default they are reported"
+            "that did not act as logged, glitches), and those beyond the hinges where the "
+            "states respond less to extreme inputs (commands a rotor clipped), before "
+            "selecting; by default they are reported"
         ),
     ] = False,
     keep_rest: Annotated[
