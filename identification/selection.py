@@ -23,8 +23,8 @@ Nothing here knows a vehicle or a simulator. :func:`select_model` is the entry p
    the error of every state, divided by that state's scale (the smaller of its standard
    deviation over the data and the error of holding it over the horizon:
    :func:`score_scale`), is averaged over states, steps and starts (root mean square).
-   The windows and the horizon are sized to the segments that hold most of the data
-   (:func:`typical_length`).
+   The windows and the horizon are sized to the segments that hold half and most of the data
+   (:func:`~identification.scoring.window_cap`, :func:`~identification.scoring.typical_length`).
    A prediction that leaves finite numbers or grows past 1e3 state deviations scores inf.
 4. **Rule: one standard error.** Among candidates whose mean fold score is within one
    standard error (over folds) of the best mean, the one with the fewest terms (fitted on all
@@ -136,8 +136,8 @@ from identification.scoring import (
     score_scale,
     start_spans,
     start_states,
-    typical_length,
     validation_units,
+    window_cap,
 )
 from identification.support import (
     F_CRITICAL,
@@ -165,9 +165,9 @@ SELECT_LAMBDAS: tuple[float, ...] = tuple(float(v) for v in np.logspace(-6, 0, 1
 """Scaled thresholds tried by default (half decades from 1e-6 to 1)."""
 
 WINDOWS: tuple[int, ...] = (1, 4, 16, 64)
-"""Integral windows tried by default (1: clean data; longer: noise; a window of a quarter of the
-data's typical segment (:func:`typical_length`) or more is skipped). 64 lets the validation
-average sigma = 1e-2 noise."""
+"""Integral windows tried by default (1: clean data; longer: noise; a window of
+:func:`window_cap` or more, a quarter of the segments that hold half of the rows, is skipped).
+64 lets the validation average sigma = 1e-2 noise."""
 
 BAG_T = 2.0
 """A kept term's coefficient must exceed this many standard deviations of its bootstrap fits,
@@ -885,9 +885,9 @@ def _select_model(
     units, windows, horizon = validation_units(trajs, folds, windows, horizon)
     if not set(asked) & set(windows):
         raise ValueError(
-            f"every window asked ({asked}) is too long for this data: windows up to a quarter "
-            f"of the typical segment ({typical_length(trajs)} rows) fit; window "
-            f"{max(windows)} does"
+            f"every window asked ({asked}) is too long for this data: windows under "
+            f"{window_cap(trajs)} (a quarter of the segments that hold half of the rows) fit; "
+            f"window {max(windows)} does"
         )
     k = min(folds, len(units))
     fold_of = np.arange(len(units)) % k

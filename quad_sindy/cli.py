@@ -635,7 +635,7 @@ def identify(
     from identification.features import parse_term
     from identification.fit import FitConfig, fit
     from identification.libraries import library_from_spec, spec_angles
-    from identification.scoring import long_enough, typical_length
+    from identification.scoring import long_enough, window_cap
     from identification.selection import WINDOWS, select_model, term_note_count
     from identification.support import long_run_ratio
     from quad_envs.fileio import atomic_write_bytes
@@ -787,10 +787,11 @@ def identify(
             label = preset or (library if library in ("planar", "quad6dof") else None)
             if lam == "auto":
                 windows = WINDOWS if window_value is None else (window_value,)
-                if window_value is not None and window_value >= max(typical_length(trajs) // 4, 2):
+                if window_value is not None and window_value >= window_cap(trajs):
                     _fail(
                         f"--window {window_value} does not fit the data: windows must be under "
-                        f"a quarter of the typical segment ({typical_length(trajs)} rows)"
+                        f"{window_cap(trajs)} (a quarter of the segments that hold half of the "
+                        "rows)"
                     )
                 if prewhiten is None and window_value not in (None, 1):
                     prewhiten = False  # a prewhitened fit is at window 1: the window asked
