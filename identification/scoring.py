@@ -48,8 +48,8 @@ def validation_units(
     """The cross-validation units, and the windows and horizon that fit them.
 
     Windows are capped at :func:`window_cap` and the horizon at half of the typical segment
-    (:func:`typical_length`); on a single short log (one flight of 150 rows) they shrink further until the data make two
-    blocks, so that every fold has data to train on.
+    (:func:`typical_length`); on a single short log (one flight of 150 rows) they shrink
+    further until the data make two blocks, so that every fold has data to train on.
 
     Raises:
         ValueError: Too few rows for two blocks of :data:`MIN_UNIT_ROWS`.

@@ -983,7 +983,8 @@ def test_commands_beyond_a_6dof_vehicles_rotors_are_named_on_its_wide_library():
     spec = FlightSpec(flights=4, seed=0)
     applied = quad6dof_flights(OTHER_6DOF, spec)
     sent = quad6dof_flights(OTHER_6DOF, dataclasses.replace(spec, log_commands=True))
-    clipped = [np.any(abs(s.u - a.u) > 1e-9, axis=1)[_step_rows(s)] for s, a in zip(sent, applied)]
+    clipped = [np.any(abs(s.u - a.u) > 1e-9, axis=1)[_step_rows(s)]
+               for s, a in zip(sent, applied, strict=True)]  # fmt: skip
     assert sum(c.sum() for c in clipped) == 47  # of 3996 steps
     xi = truth_matrix(truth_quad6dof(OTHER_6DOF), sent[0].state_names, names)
     assert input_saturation(add_noise(applied, 1e-3, seed=50), names, xi) is None
@@ -991,6 +992,6 @@ def test_commands_beyond_a_6dof_vehicles_rotors_are_named_on_its_wide_library():
     assert found is not None and "respond less to the inputs" in found.note
     flagged = found.flagged(sent)
     cut = [flagged[i][:, 0] if i in flagged else np.zeros_like(c) for i, c in enumerate(clipped)]
-    hits = sum(int((f & c).sum()) for f, c in zip(cut, clipped))
+    hits = sum(int((f & c).sum()) for f, c in zip(cut, clipped, strict=True))
     assert hits >= 0.9 * sum(c.sum() for c in clipped), (hits, found.note)
     assert hits >= 0.8 * sum(f.sum() for f in cut), (hits, found.note)
