@@ -570,3 +570,16 @@ def test_score_renames_columns_as_identify_did(monkeypatch, capsys, tmp_path):
         assert code in (0, None), err
         scores.append(next(line for line in out.splitlines() if line.startswith("score")))
     assert scores[0] == scores[1]
+
+
+def test_a_window_the_segments_cannot_hold_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
+    """``identify --window`` at or past the cap of automatic selection (a quarter of the
+    segments that hold half of the rows: three logs of 200 rows allow windows under 50)."""
+    from identification.data import write_trajectory_csv
+    from identification.experiments.synthetic import OTHER_PLANAR, FlightSpec, planar_flights
+
+    flights = planar_flights(OTHER_PLANAR, FlightSpec(flights=3, steps=200))
+    paths = [str(write_trajectory_csv(tmp_path / f"f{i}.csv", t)) for i, t in enumerate(flights)]
+    code, _, err = run_cli(monkeypatch, capsys, "identify", *paths, "--out",
+                           str(tmp_path / "m.json"), "--window", "50")  # fmt: skip
+    assert_one_line_error(code, err, "--window 50 does not fit the data", "under 50")
