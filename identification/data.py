@@ -213,6 +213,48 @@ class Trajectory:
                              f"constants of {tau:g} s)")  # fmt: skip
         return part.slice(rows, len(self)) if rows else part
 
+    def drift_inputs(self, rate: float, start: float | None = None) -> Trajectory:
+        """The trajectory with its held inputs times a gain ``1 + rate (t - start)``.
+
+        A battery that sags turns each command into less force as a flight goes on (a
+        trial's 15 % over each flight gave 10 terms for 7 and 43 % at 1 s): the vehicle
+        applies the gain times what was logged. ``start`` is the time the gain is 1 at (the
+        log's first row; default this trajectory's). The gain is taken from the logged
+        inputs each call (``meta["input_drift"]`` and ``meta["drift_start"]`` record it, so
+        a second call replaces the first); measured inputs are signals and keep their
+        values; lagged actuators' commands (:attr:`commands`) get the same gain.
+
+        Raises:
+            ValueError: ``rate`` not finite, or a gain under :data:`DRIFT_MIN_GAIN` on a row.
+        """
+        rate = float(rate)
+        if not math.isfinite(rate):
+            raise ValueError(f"an input drift is a rate per second, got {rate!r}")
+        start = float(self.t[0] if start is None else start)
+        gain = 1.0 + rate * (self.t - start)
+        if gain.min() < DRIFT_MIN_GAIN:
+            raise ValueError(
+                f"an input drift of {rate:g} per second takes the inputs' gain to "
+                f"{gain.min():.3g} at t = {self.t[int(np.argmin(gain))]:g} s (at least "
+                f"{DRIFT_MIN_GAIN:g}): a gain that changes so much is not a drift"
+            )
+        old = 1.0 + float(self.meta.get("input_drift", 0.0)) * (
+            self.t - float(self.meta.get("drift_start", self.t[0]))
+        )
+        held = [k for k, n in enumerate(self.input_names) if n not in self.measured]
+        part = self.slice(0, len(self))
+        part.u = self.u.copy()
+        part.u[:, held] *= (gain / old)[:, None]
+        if self.commands is not None:
+            part.commands = self.commands.copy()
+            part.commands[:, held] *= (gain / old)[:, None]
+        if rate:
+            part.meta.update(input_drift=rate, drift_start=start)
+        else:
+            part.meta.pop("input_drift", None)
+            part.meta.pop("drift_start", None)
+        return part
+
     def stage_inputs(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The inputs at the start, middle and end of the steps that start at ``rows``.
 
@@ -260,6 +302,53 @@ def input_lag_of(trajs: Sequence[Trajectory]) -> float:
         raise ValueError(f"the trajectories' inputs act through different lags {lags} s: "
                          "give them all the same (Trajectory.lag_inputs)")  # fmt: skip
     return lags[0] if lags else 0.0
+
+
+DRIFT_MIN_GAIN = 0.5
+"""The least gain an input drift may take the inputs to (:meth:`Trajectory.drift_inputs`)."""
+
+
+def input_drift_of(trajs: Sequence[Trajectory]) -> float:
+    """The drift rate [1/s] of the trajectories' input gain (0: none; one for all)."""
+    rates = sorted({float(t.meta.get("input_drift", 0.0)) for t in trajs})
+    if len(rates) > 1:
+        raise ValueError(f"the trajectories' inputs drift at different rates {rates} per "
+                         "second: give them all the same (drift_segments)")  # fmt: skip
+    return rates[0] if rates else 0.0
+
+
+def log_starts(trajs: Sequence[Trajectory]) -> list[float]:
+    """Each segment's log's first time.
+
+    Its file's first clean row (``meta["log_start"]``), else the earliest of the segments
+    from its file (``meta["source"]``), else its own first row.
+    """
+    first: dict[str, float] = {}
+    for tr in trajs:
+        source = tr.meta.get("source")
+        if source is not None:
+            first[source] = min(first.get(source, np.inf), float(tr.t[0]))
+    return [float(tr.meta["log_start"]) if "log_start" in tr.meta
+            else first[tr.meta["source"]] if tr.meta.get("source") is not None
+            else float(tr.t[0]) for tr in trajs]  # fmt: skip
+
+
+def drift_segments(trajs: Sequence[Trajectory], rate: float) -> list[Trajectory]:
+    """Each segment's held inputs times ``1 + rate (t - its log's start)``.
+
+    (:meth:`Trajectory.drift_inputs`, the start from :func:`log_starts`.)
+
+    Raises:
+        ValueError: ``rate`` is not a number, no input is held, or it takes a gain under
+            :data:`DRIFT_MIN_GAIN`.
+    """
+    if isinstance(rate, bool) or not isinstance(rate, int | float | np.floating | np.integer):
+        raise TypeError(f"an input drift is a rate per second, got {rate!r}")
+    if rate and all(n in trajs[0].measured for n in trajs[0].input_names):
+        raise ValueError("an input drift scales commands held over each step, and the data "
+                         "have none (every input is measured, or there are no inputs)")  # fmt: skip
+    starts = log_starts(trajs)
+    return [tr.drift_inputs(rate, start) for tr, start in zip(trajs, starts, strict=True)]
 
 
 def lag_segments(trajs: Sequence[Trajectory], tau: float) -> tuple[list[Trajectory], int]:
@@ -1752,8 +1841,9 @@ def read_log(
         data[:, cols.index(time)], data[:, [cols.index(c) for c in st]],
         data[:, [cols.index(c) for c in inp]], st, inp, angles=angles, measured=measured,
     )  # fmt: skip
+    start = min((float(seg.t[0]) for seg in segs), default=0.0)
     for seg in segs:
-        seg.meta["source"] = str(path)
+        seg.meta.update(source=str(path), log_start=start)
     report.notes = [*(f"{Path(path).name}: {note}" for note in notes), *report.notes]
     return segs, report
 

@@ -21,7 +21,9 @@ from identification.data import (
     LAG_SETTLE,
     Trajectory,
     clock_line,
+    input_drift_of,
     input_lag_of,
+    log_starts,
     logged_resolution,
 )
 from identification.features import compile_features, parse_term, term_name
@@ -272,7 +274,7 @@ def disagreement_note(
     names: Sequence[str],
     window: int,
     xi: np.ndarray,
-) -> str | None:
+) -> tuple[str | None, bool]:
     """A warning where the model's terms, refitted on each log alone, differ between logs.
 
     Pooled flights of different vehicles (payloads, batteries, `param_randomization`) get
@@ -293,6 +295,10 @@ def disagreement_note(
     Where the logs agree, the first and second halves of each log are compared the same
     way: a battery that sags alike in every flight moved `u2` from 242 to 221 between the
     halves of each of a trial's three logs, and no note had said so.
+
+    Returns:
+        The note (None: the logs agree) and whether the logs agree but their halves
+        disagree on an input's gain (a drift :func:`input_drift` may fit).
     """
     found = _disagreeing(trajs, names, window, xi)
     halves = [part for tr in trajs for part in (tr.slice(0, len(tr) // 2),
@@ -307,10 +313,11 @@ def disagreement_note(
             "varies between the logs, or logs of different vehicles (payloads, batteries) "
             "were pooled, which no one model fits (identify each vehicle's logs on its own)"
             + ("; the halves of the logs disagree too, so a parameter may drift within the "
-               "flights (a battery that sags)" if drift else "")
+               "flights (a battery that sags)" if drift else ""),
+            False,  # (the halves of logs that disagree differ between the logs too)
         )  # fmt: skip
     if not drift:
-        return None
+        return None, False
     count, i, j, low, high, more = drift
     return (
         f"the halves of the logs disagree: refitted on each of {count} half-logs alone, "
@@ -318,8 +325,50 @@ def disagreement_note(
         f"from {low:.4g} to {high:.4g}){_others(more)}: a parameter drifts within the flights "
         "(a battery that sags, fuel or a payload that changes), the inputs did not act as "
         "logged, or the library lacks a term that changes along them; no one model fits both "
-        "halves"
+        "halves",
+        True,
     )
+
+
+DRIFT_SPAN = 0.4
+"""The largest change of the inputs' gain over the longest log that :func:`input_drift`
+searches (either way from the drift the data already carry)."""
+
+
+def input_drift(trajs: Sequence[Trajectory], names: Sequence[str], window: int,
+                xi: np.ndarray) -> float:  # fmt: skip
+    """The rate [1/s] of a drift of the inputs' gain that the model's own terms fit best.
+
+    A battery that sags alike in every flight turns each logged command into less force as
+    the flight goes on (:meth:`~identification.data.Trajectory.drift_inputs`: applied =
+    ``(1 + rate tau) command``, ``tau`` the time since the log's first row). Each equation
+    with an input term is refitted on its terms in ``xi`` with the held inputs so scaled,
+    and the rate that leaves the least mean log residual is found (bounded search of
+    :data:`DRIFT_SPAN` over the longest log about the rate the data carry: the model
+    selected with a drift refines it). Returns the data's own rate where none fits better.
+    """
+    from scipy.optimize import minimize_scalar
+
+    driven = _driven(trajs, names, xi)
+    usable = [(t, s) for t, s in zip(trajs, log_starts(trajs), strict=True)
+              if len(t) >= window + 3]  # fmt: skip
+    now = input_drift_of(trajs)
+    if not driven or not usable:
+        return now
+    span = max(float(t.t[-1]) - s for t, s in usable)
+    refit = _own_terms_refit(xi, names, window, driven)
+
+    def cost(rate: float) -> float:
+        try:
+            drifted = [t.drift_inputs(rate, s) for t, s in usable]
+        except ValueError:  # a gain under the floor
+            return np.inf
+        return float(np.mean(np.log(np.maximum(refit(drifted)[0], 1e-300))))
+
+    bounds = (now - DRIFT_SPAN / span, now + DRIFT_SPAN / span)
+    found = minimize_scalar(cost, bounds=bounds, method="bounded",
+                            options={"xatol": 1e-8 / span})  # fmt: skip
+    return float(found.x) if cost(found.x) < cost(now) else now
 
 
 def _others(more: int) -> str:

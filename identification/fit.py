@@ -55,6 +55,7 @@ from identification.data import (
     as_trajectories,
     check_glitches,
     data_ranges,
+    input_drift_of,
     input_lag_of,
 )
 from identification.features import compile_features, compile_rhs, parse_term, term_name
@@ -1249,6 +1250,7 @@ def fit(
         "n_trajectories": len(trajs),
         **({"measured_inputs": list(trajs[0].measured)} if trajs[0].measured else {}),
         **({"input_lag": lag} if (lag := input_lag_of(trajs)) else {}),
+        **({"input_drift": rate} if (rate := input_drift_of(trajs)) else {}),
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "conditioning": conditioning,

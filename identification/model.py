@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -435,6 +436,10 @@ def _check_meta(meta: dict[str, Any], inputs: Sequence[str], source: str) -> Non
     if isinstance(lag, bool) or not isinstance(lag, int | float) or not 0 <= lag < 1e6:
         raise ValueError(f"{source}: meta.input_lag must be a time constant >= 0 [s], "
                          f"got {lag!r}")  # fmt: skip
+    drift = meta.get("input_drift", 0.0)
+    if isinstance(drift, bool) or not isinstance(drift, int | float) or not math.isfinite(drift):
+        raise ValueError(f"{source}: meta.input_drift must be a rate per second (a number), "
+                         f"got {drift!r}")  # fmt: skip
     if not isinstance(meta.get("time_column", "t"), str):
         raise ValueError(f"{source}: meta.time_column must be a column name (a string)")
     if not isinstance(meta.get("units", {}), dict):  # (a string was read as seconds, silently)

@@ -67,6 +67,32 @@ def _lagged(trajs: list, tau: float) -> tuple[list, str]:
                   f"the actuators' start settles){short_note}")  # fmt: skip
 
 
+def _drifted(trajs: list, rate: float) -> tuple[list, str]:
+    """The segments with their held inputs' gain drifting at ``rate``, and what (one line)."""
+    from identification.data import drift_segments
+
+    try:
+        kept = drift_segments(trajs, rate)
+    except ValueError as exc:
+        _fail(f"--input-drift: {exc}")
+    held = [n for n in trajs[0].input_names if n not in trajs[0].measured]
+    return kept, (f"{', '.join(held)} times 1 {'+' if rate > 0 else '-'} {abs(rate):g} per "
+                  "second from each log's first row (--input-drift)")  # fmt: skip
+
+
+def _drift_option(text: str) -> float | None:
+    """``--input-drift``: None for auto, else the rate [1/s] (refused in one line)."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        _fail(f"--input-drift is 'auto' or a rate per second (a number), got {text!r}")
+    return value
+
+
 def _lag_option(text: str) -> float | None:
     """``--input-lag``: None for auto, else the time constant [s] (refused in one line)."""
     if text.strip().lower() == "auto":
@@ -614,6 +640,18 @@ def identify(
             metavar="auto|SECONDS",
         ),
     ] = "auto",
+    input_drift: Annotated[
+        str,
+        typer.Option(
+            help="rate [1/s] at which the held inputs' gain drifts: the vehicle applies 1 + "
+            "RATE t times each logged input, t from its log's first row (a battery that sags: "
+            "negative; 0: they act as logged); auto: as logged, and where the halves of the "
+            "logs disagree on an input's gain, selected again with the drift the model's "
+            "terms fit best and kept if it predicts the held-out data better. The model is "
+            "the vehicle at gain 1",
+            metavar="auto|RATE",
+        ),
+    ] = "auto",
     plot: Annotated[
         Path | None,
         typer.Option(help="selection plot (default: OUT.png)", parser=_file_name, metavar="FILE"),
@@ -648,6 +686,7 @@ def identify(
     # (a scaled threshold: 1 already leaves out a term that explains the whole target)
     lam_value = _number_option("--lambda", lam, float, 0.0, 1e3) if lam != "auto" else None
     lag_value = _lag_option(input_lag)
+    drift_value = _drift_option(input_drift)
     window_value = _number_option("--window", window, int, low=1) if window != "auto" else None
     _writable_file(out, data)  # before the selection, which may take a minute
     if lam_value is None and method != "paper":
@@ -728,6 +767,12 @@ def identify(
             typer.echo(f"data: inputs taken {abs(input_shift)} row(s) "
                        f"{'later' if input_shift > 0 else 'earlier'} (--input-shift)"
                        + dropped)  # fmt: skip
+        if drift_value:
+            if method == "paper":
+                _fail("the paper's method has no input drift: leave out --input-drift")
+            trajs, drifted = _drifted(trajs, drift_value)
+            first = trajs[0]
+            typer.echo(f"data: {drifted}")
         if lag_value:
             if method == "paper":
                 _fail("the paper's method has no input lag: leave out --input-lag")
@@ -799,6 +844,7 @@ def identify(
                     trajs, lib, config=config, windows=windows, system=label, progress=True,
                     drop_outliers=drop_outliers, prewhiten=prewhiten, keep_rest=keep_rest,
                     input_lag=0.0 if lag_value == 0 else None,  # (a lag given: the data's)
+                    input_drift=0.0 if drift_value == 0 else None,
                 )  # fmt: skip
                 noted = ()  # printed with the report
                 best = report.best

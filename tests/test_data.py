@@ -723,3 +723,35 @@ def test_lagged_inputs_follow_a_first_order_actuator_exactly():
         tr.slice(0, 22).lag_inputs(tau)
     with pytest.raises(ValueError, match="different lags"):
         select_model([once, tr], planar_library())
+
+
+def test_a_drift_of_the_inputs_gain_scales_each_logs_held_inputs_from_its_first_row(tmp_path):
+    """A battery that sags: the vehicle applies ``1 + rate tau`` times each logged input,
+    ``tau`` from its log's first row (a file's segments share their file's start). Held
+    inputs only; a second drift replaces the first; a gain under the floor is refused."""
+    from identification.data import drift_segments, input_drift_of, load_data
+
+    rng = np.random.default_rng(3)
+    t = np.arange(400) * 0.01
+    x, u = rng.normal(size=(400, 6)), rng.normal(size=(400, 2)) + 2.0
+    tr = Trajectory(t + 5.0, x, u, PS, PI, measured=("u2",))
+    drifted = tr.drift_inputs(-0.04)
+    np.testing.assert_allclose(drifted.u[:, 0], u[:, 0] * (1 - 0.04 * t), rtol=1e-14)
+    np.testing.assert_array_equal(drifted.u[:, 1], u[:, 1])  # a measured signal
+    np.testing.assert_array_equal(drifted.x, x)
+    again = drifted.drift_inputs(0.02)  # from the logged inputs, not the drifted ones
+    np.testing.assert_allclose(again.u[:, 0], u[:, 0] * (1 + 0.02 * t), rtol=1e-14)
+    np.testing.assert_allclose(again.drift_inputs(0.0).u, u, rtol=1e-14)
+    assert input_drift_of([again]) == 0.02 and input_drift_of([again.drift_inputs(0.0)]) == 0.0
+    with pytest.raises(ValueError, match="takes the inputs' gain to 0.202 at t = 8.99 s"):
+        tr.drift_inputs(-0.2)
+    # a file split at a gap: the second segment's gain continues from the file's start
+    rows = np.column_stack([t, x, u])
+    path = tmp_path / "gap.csv"
+    np.savetxt(path, np.delete(rows, range(200, 210), axis=0), delimiter=",", comments="",
+               header="t,y,z,phi,y_dot,z_dot,phi_dot,u1,u2")  # fmt: skip
+    segments, _ = load_data([path], system="planar")
+    assert len(segments) == 2
+    for seg in drift_segments(segments, -0.04):
+        np.testing.assert_allclose(seg.u / (1 - 0.04 * seg.t)[:, None],
+                                   u[np.searchsorted(t, seg.t)], rtol=1e-12)  # fmt: skip

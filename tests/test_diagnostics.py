@@ -283,9 +283,10 @@ def test_logs_of_two_vehicles_pooled_are_named_and_one_vehicles_noisy_logs_are_n
     other = planar_flights(heavy, FlightSpec(flights=2, seed=5))
     for sigma in (0.0, 1e-2):
         one = add_noise(other_clean, sigma, seed=2) if sigma else other_clean
-        assert disagreement_note(one, names, 4, exact) is None, sigma
+        assert disagreement_note(one, names, 4, exact) == (None, False), sigma
         both = [*one, *(add_noise(other, sigma, seed=3) if sigma else other)]
-        note = disagreement_note(both, names, 4, exact)
+        note, drifting = disagreement_note(both, names, 4, exact)
+        assert not drifting  # each vehicle's own logs agree within themselves
         assert note is not None and note.startswith("the logs disagree: refitted on each of 5")
         text = note.split("' from ")[1].split(")")[0]
         low, high = (float(v) for v in text.split(" to "))
@@ -303,7 +304,7 @@ def test_logs_of_two_vehicles_pooled_are_named_and_one_vehicles_noisy_logs_are_n
     only = np.zeros_like(exact)
     only[PS.index("z_dot")] = exact[PS.index("z_dot")]
     only[PS.index("z_dot"), names.index("u1")] = 1e-9  # in the support
-    note = disagreement_note(pair, names, 4, only)
+    note = disagreement_note(pair, names, 4, only)[0]
     assert note is not None and "z_dot' differs" in note, note
 
 
@@ -311,8 +312,9 @@ def test_a_gain_that_drifts_alike_in_every_log_is_named_from_the_halves(other_cl
     """A battery that sags alike in every flight: the logged inputs overstate the applied
     ones by a factor that grows to 1 / 0.85 over each log. The logs agree with each other
     (a trial: no note), so their halves are compared: the note names the drift and an input
-    term, whose refits move by about the sag, not a stand-in; the unsagged logs get none."""
-    from identification.diagnostics import disagreement_note
+    term, whose refits move by about the sag, not a stand-in; the unsagged logs get none. On
+    the true terms the drift that fits best is the sag's rate."""
+    from identification.diagnostics import disagreement_note, input_drift
     from identification.experiments.truth import truth_matrix
 
     names = planar_library()
@@ -320,13 +322,16 @@ def test_a_gain_that_drifts_alike_in_every_log_is_named_from_the_halves(other_cl
     sag = [1 - 0.15 * (tr.t - tr.t[0]) / np.ptp(tr.t) for tr in other_clean]
     sagged = [dataclasses.replace(tr, u=tr.u / s[:, None])
               for tr, s in zip(other_clean, sag, strict=True)]  # fmt: skip
-    assert disagreement_note(other_clean, names, 4, exact) is None
-    note = disagreement_note(sagged, names, 4, exact)
-    assert note is not None and note.startswith("the halves of the logs disagree"), note
+    assert disagreement_note(other_clean, names, 4, exact) == (None, False)
+    note, drifting = disagreement_note(sagged, names, 4, exact)
+    assert drifting and note is not None and note.startswith("the halves of the logs disagree")
     term = note.split("('")[1].split("'")[0]
     assert term in ("cos(phi) u1", "sin(phi) u1", "u2"), note
     low, high = (float(v) for v in note.split("' from ")[1].split(")")[0].split(" to "))
     assert 1.05 < high / low < 1.25  # the halves' mean gains differ by about 10 %
+    rate = -0.15 / np.ptp(other_clean[0].t)
+    assert input_drift(sagged, names, 4, exact) == pytest.approx(rate, rel=1e-3)
+    assert abs(input_drift(other_clean, names, 4, exact)) < 1e-5 * abs(rate)
 
 
 def test_a_model_records_its_training_range_and_score_names_data_beyond_it(tmp_path, other_clean):
