@@ -565,9 +565,10 @@ def _select_drifted(
         "changes): the halves of the logs disagreed on an input's gain, and the model "
         f"selected with the drift predicts its held-out data better ({ours:.3g} of holding "
         f"the state, against {theirs:.3g} as logged). The model is the vehicle at the start "
-        "of its logs (gain 1); the drift is kept in meta.input_drift, and simulate, score "
-        "and the surrogate env do not apply it (--input-drift 0 or input_drift=0 keeps the "
-        "inputs as logged)"
+        "of its logs (gain 1): simulate and the surrogate env fly it so, and score applies "
+        "the drift (meta.input_drift) to held-out logs as in training (--input-drift 0 there "
+        "reads them as logged; here, --input-drift 0 or input_drift=0 keeps the inputs as "
+        "logged)"
     ))  # fmt: skip
     return model, report
 

@@ -950,6 +950,16 @@ def score(
             show_default=False,
         ),
     ] = None,
+    input_drift: Annotated[
+        str | None,
+        typer.Option(
+            help="rate [1/s] of the drift of the held inputs' gain (default, or auto: the "
+            "model's own, from identify; 0: logs whose inputs act as logged, such as a fresh "
+            "battery's first seconds or the applied inputs)",
+            metavar="auto|RATE",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Predicts held-out logs open loop with their recorded inputs: error after --seconds.
 
@@ -1004,6 +1014,12 @@ def score(
             when = "later" if shift > 0 else "earlier"
             source = "as in training" if input_shift is None else "as --input-shift asks"
             typer.echo(f"data: inputs taken {abs(shift)} row(s) {when}, {source}{dropped}")
+        drift_given = None if input_drift is None else _drift_option(input_drift)
+        rate = loaded.meta.get("input_drift", 0.0) if drift_given is None else drift_given
+        if rate:  # the drift of the inputs' gain the model was identified with
+            trajs, drifted = _drifted(trajs, float(rate))
+            source = "as in training" if drift_given is None else "as --input-drift asks"
+            typer.echo(f"data: {drifted}, {source}")
         given = None if input_lag is None else _lag_option(input_lag)  # (auto: None)
         lag = loaded.meta.get("input_lag", 0.0) if given is None else given
         if lag:  # the actuators' lag the model was identified with

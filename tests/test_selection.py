@@ -1483,8 +1483,9 @@ def test_identify_input_drift_applies_a_rate_given_and_refuses_one_that_is_not(
     other_clean, tmp_path
 ):
     """``--input-drift RATE`` scales the logged inputs from each file's first row and the
-    model records the rate; a rate that is no number, or that takes the gain under the
-    floor, is one line and a non-zero exit."""
+    model records the rate; ``score`` reads held-out logs with it, as in training, and with
+    ``--input-drift 0`` as logged; a rate that is no number, or that takes the gain under
+    the floor, is one line and a non-zero exit."""
     paths = [str(write_trajectory_csv(tmp_path / f"s{k}.csv", tr))
              for k, tr in enumerate(_sagged(other_clean, 0.15))]  # fmt: skip
     rate = float(-0.15 / np.ptp(other_clean[0].t))
@@ -1497,6 +1498,16 @@ def test_identify_input_drift_applies_a_rate_given_and_refuses_one_that_is_not(
     assert model.meta["input_drift"] == rate
     check = check_support(model, truth_planar(OTHER_PLANAR))
     assert not check.missed and not check.spurious and check.max_rel_error < 1e-6, check
+    # score reads held-out logs as in training: a sagging flight it never saw
+    unseen = _sagged(planar_flights(OTHER_PLANAR, FlightSpec(flights=1, steps=600, seed=7)), 0.15)
+    held = str(write_trajectory_csv(tmp_path / "held.csv", unseen[0]))
+    scores = {}
+    for given in ((), ("--input-drift", "0")):
+        run = CliRunner().invoke(app, ["score", str(out), held, *given])
+        assert run.exit_code == 0, run.output
+        assert ("as in training" in run.output) is not given, run.output
+        scores[given] = float(run.output.split("selection): ")[1].split(";")[0])
+    assert scores[()] < 1e-6 < 1e-3 < scores[("--input-drift", "0")], scores
     for bad, said in (("fast", "--input-drift is 'auto' or a rate per second"),
                       ("-0.2", "--input-drift: an input drift of -0.2 per second")):  # fmt: skip
         run = CliRunner().invoke(app, ["identify", *paths, "--input-drift", bad, "--out",
