@@ -819,6 +819,8 @@ def _select_prewhitened(
         if prewhiten or white.n_terms <= model.n_terms + AR1_EXTRA_TERMS:
             white_report.error_ar1 = rho
             white_report.warnings.append(_ar1_note(rho, report, white.n_terms, None))
+            if white_report.drift is None:  # a gain's drift the plain model's halves showed
+                white_report.drift = report.drift  # (a sag's correlated errors, prewhitened)
             model, report = white, white_report
         else:
             report.warnings.append(_ar1_note(rho, report, white.n_terms, "kept"))

@@ -355,7 +355,7 @@ GUST_TAU = 0.4
 
 def gusty_planar_flights(
     params: PlanarQuadParams, gust: float, seed: int, flights: int = 3, steps: int = 1200,
-    dt: float = 0.01, lag: float = 0.0,
+    dt: float = 0.01, lag: float = 0.0, sag: float = 0.0,
 ) -> list[Trajectory]:  # fmt: skip
     """Planar PD flights in unmeasured gusts: data from a simulator of its own, not the envs'.
 
@@ -370,6 +370,10 @@ def gusty_planar_flights(
     With ``lag`` > 0 [s] the actuators follow the commands through a first-order lag (a
     motor's time constant; integrated with the states) and the *commands* are logged: the
     case of :meth:`Trajectory.lag_inputs`.
+
+    With ``sag`` > 0 a battery sags by that share over each flight: the vehicle applies
+    ``1 - sag t / T`` times the commands (``T`` the flight's length), and the commands are
+    logged (the case of :meth:`Trajectory.drift_inputs`); the PD does not know it.
     """
     rng = np.random.default_rng(seed)
     m, ixx, g = params.mass, params.Ixx, 9.81
@@ -387,6 +391,7 @@ def gusty_planar_flights(
             dither = 0.9 * dither + 0.44 * rng.normal(size=2) * [0.05 * m * g, 15 * ixx]
             u = dither + [m * (g + az) / np.cos(phi), ixx * (250 * (tilt - phi) - 30 * w)]
             states[k], inputs[k] = x, u
+            u = u * (1 - sag * k / steps)  # (held over the step, as a command is)
             h = dt / 5
             for _ in range(5):
                 decay = np.exp(-h / GUST_TAU)
@@ -404,7 +409,7 @@ def gusty_planar_flights(
                 else:
                     x = rk4_step(plant, x, u, h)
         t = np.arange(steps) * dt
-        meta = {"gust": gust, "lag": lag}
+        meta = {"gust": gust, "lag": lag, "sag": sag}
         out.append(Trajectory(t, states, inputs, PLANAR_STATE_NAMES, PLANAR_INPUT_NAMES, meta=meta))
     return out
 
