@@ -261,19 +261,30 @@ class Trajectory:
         A held input keeps its row's value over the step (the same array is returned three
         times when every input is held); a :attr:`measured` one follows
         :func:`stage_inputs`; a lagged one (:meth:`lag_inputs`) follows its actuator
-        (:func:`lag_stages`).
+        (:func:`lag_stages`); a drifting one (:meth:`drift_inputs`) follows its gain within
+        the step (a battery sags in continuous time: a trial's clean logs held 7 spurious
+        terms with the gain held over each step).
 
         Args:
             rows: Row indices, each below ``len(self) - 1``.
         """
         cols = [self.input_names.index(n) for n in self.measured]
         stages = stage_inputs(self.t, self.u, rows, cols)
-        if self.commands is None:
+        rate = float(self.meta.get("input_drift", 0.0))
+        if self.commands is None and not rate:
             return stages
         held = [k for k in range(len(self.input_names)) if k not in cols]
         u0, um, u1 = stages[0], stages[1].copy(), stages[2].copy()
-        um[:, held], u1[:, held] = lag_stages(self.t, self.u[:, held], self.commands[:, held],
-                                              float(self.meta["input_lag"]), rows)  # fmt: skip
+        if self.commands is not None:
+            um[:, held], u1[:, held] = lag_stages(self.t, self.u[:, held],
+                                                  self.commands[:, held],
+                                                  float(self.meta["input_lag"]), rows)  # fmt: skip
+        if rate:  # each stage's gain against the row's, which ``u`` holds
+            start = float(self.meta.get("drift_start", self.t[0]))
+            t0, t1 = self.t[rows], self.t[rows + 1]
+            gain = 1.0 + rate * (t0 - start)
+            um[:, held] *= ((1.0 + rate * ((t0 + t1) / 2 - start)) / gain)[:, None]
+            u1[:, held] *= ((1.0 + rate * (t1 - start)) / gain)[:, None]
         return u0, um, u1
 
     @classmethod

@@ -268,7 +268,8 @@ def _rollouts(
     states = np.concatenate([tr.x for tr in trajs])
     observed = np.concatenate([tr.observed for tr in trajs])
     steps = np.concatenate([np.append(np.diff(tr.t), np.nan) for tr in trajs])
-    held = not any(tr.measured or tr.commands is not None for tr in trajs)
+    held = not any(tr.measured or tr.commands is not None or tr.meta.get("input_drift")
+                   for tr in trajs)  # fmt: skip
     if held:  # each step's input is its row's
         stages = [np.concatenate([tr.u for tr in trajs])]
     else:

@@ -255,9 +255,10 @@ class SelectionReport:
         start_spans: Per state, the half-width in rows of the local quadratic the scores'
             predictions start from (:func:`~identification.scoring.start_spans`; 0: the
             logged row).
-        drift: Where the halves of the logs disagree on an input's gain, the drift rate of
-            the inputs' gain [1/s] that the model's own terms fit best
-            (:func:`~identification.diagnostics.input_drift`); else None.
+        drift: The drift rate of the inputs' gain [1/s] that the model's own terms fit best
+            (:func:`~identification.diagnostics.input_drift`) where the halves of the logs
+            disagree on an input's gain, the data carry a drift, or the drift passes its own
+            test; else None.
     """
 
     candidates: list[Candidate]
@@ -520,10 +521,11 @@ def _select_drifted(
 
     A battery that sags turns each command into less force as a flight goes on: a trial's
     15 % over each flight gave 10 terms for 7, 43 % off at 1 s, and a note that the halves
-    of the logs disagree. Where they disagree on an input's gain, the drift rate the
-    model's own terms fit best (:func:`~identification.diagnostics.input_drift`) is applied
-    to the logged inputs and the selection runs again (refined once on its own model), and
-    is kept where it predicts its held-out data better, as a share of holding the state.
+    of the logs disagree. Where they disagree on an input's gain, or a drift passes its own
+    test on the model's terms, the drift rate those terms fit best
+    (:func:`~identification.diagnostics.input_drift`) is applied to the logged inputs and
+    the selection runs again (refined once on its own model), and is kept where it predicts
+    its held-out data better, as a share of holding the state.
     """
     model, report = select(trajs)
     if not auto or not report.drift:
@@ -543,18 +545,17 @@ def _select_drifted(
         rate = refined
     theirs = _relative_score(report)
     if kept is None:
-        report.warnings.append(f"the halves of the logs disagree on an input's gain, and the "
-                               f"selection with a drift of it of {rate:.3g} per second "
-                               "failed: the inputs are kept as logged")  # fmt: skip
+        report.warnings.append(f"the model's terms fit a drift of the inputs' gain of "
+                               f"{rate:.3g} per second, and the selection with it failed: the "
+                               "inputs are kept as logged")  # fmt: skip
         return model, report
     ours, rate = _relative_score(kept[1]), float(kept[0].meta["input_drift"])
     span = max(float(t.t[-1]) - s for t, s in zip(trajs, log_starts(trajs), strict=True))
     if ours > theirs:  # a drift that predicts the held-out parts worse is not the vehicle's
         report.warnings.append(
-            f"the halves of the logs disagree on an input's gain; a drift of it of {rate:.3g} "
-            f"per second fits the model's terms best, but the model selected with it predicts "
-            f"its held-out data worse ({ours:.3g} of holding the state, against {theirs:.3g}): "
-            "the inputs are kept as logged"
+            f"the model's terms fit a drift of the inputs' gain of {rate:.3g} per second, but "
+            f"the model selected with it predicts its held-out data worse ({ours:.3g} of "
+            f"holding the state, against {theirs:.3g}): the inputs are kept as logged"
         )
         return model, report
     model, report = kept
@@ -562,8 +563,9 @@ def _select_drifted(
         f"the inputs act with a gain that drifts in time, 1 {'+' if rate > 0 else '-'} "
         f"{abs(rate):.3g} per second from each log's first row ({rate * span:+.1%} over "
         f"the longest log, {span:.3g} s: a battery that sags, fuel or a payload that "
-        "changes): the halves of the logs disagreed on an input's gain, and the model "
-        f"selected with the drift predicts its held-out data better ({ours:.3g} of holding "
+        "changes): the model's terms fit it (the halves of the logs disagree on an input's "
+        "gain, or its drop in the residual passes the bar), and the model selected with it "
+        f"predicts its held-out data better ({ours:.3g} of holding "
         f"the state, against {theirs:.3g} as logged). The model is the vehicle at the start "
         "of its logs (gain 1): simulate and the surrogate env fly it so, and score applies "
         "the drift (meta.input_drift) to held-out logs as in training (--input-drift 0 there "
@@ -1214,8 +1216,9 @@ def _select_model(
     disagree, drifting = disagreement_note(used, names, best.window, xi)
     if disagree:
         report.warnings.append(disagree)
-    if drifting or input_drift_of(used):  # (refined on the terms of a drift's own model)
-        report.drift = input_drift(used, names, best.window, xi)
+    # named by the halves, refined on the terms of a drift's own model, or tested
+    report.drift = input_drift(used, names, best.window, xi,
+                               named=drifting or bool(input_drift_of(used)))  # fmt: skip
     empty = empty_equation_note(used, xi)
     if empty:
         report.warnings.append(empty)

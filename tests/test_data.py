@@ -727,8 +727,9 @@ def test_lagged_inputs_follow_a_first_order_actuator_exactly():
 
 def test_a_drift_of_the_inputs_gain_scales_each_logs_held_inputs_from_its_first_row(tmp_path):
     """A battery that sags: the vehicle applies ``1 + rate tau`` times each logged input,
-    ``tau`` from its log's first row (a file's segments share their file's start). Held
-    inputs only; a second drift replaces the first; a gain under the floor is refused."""
+    ``tau`` from its log's first row (a file's segments share their file's start), moving
+    within each step as a battery's charge does. Held inputs only; a second drift replaces
+    the first; a gain under the floor is refused."""
     from identification.data import drift_segments, input_drift_of, load_data
 
     rng = np.random.default_rng(3)
@@ -739,6 +740,9 @@ def test_a_drift_of_the_inputs_gain_scales_each_logs_held_inputs_from_its_first_
     np.testing.assert_allclose(drifted.u[:, 0], u[:, 0] * (1 - 0.04 * t), rtol=1e-14)
     np.testing.assert_array_equal(drifted.u[:, 1], u[:, 1])  # a measured signal
     np.testing.assert_array_equal(drifted.x, x)
+    _, mid, end = drifted.stage_inputs(np.arange(10))  # the gain moves within each step
+    np.testing.assert_allclose(mid[:, 0], u[:10, 0] * (1 - 0.04 * (t[:10] + 0.005)), rtol=1e-14)
+    np.testing.assert_allclose(end[:, 0], u[:10, 0] * (1 - 0.04 * t[1:11]), rtol=1e-14)
     again = drifted.drift_inputs(0.02)  # from the logged inputs, not the drifted ones
     np.testing.assert_allclose(again.u[:, 0], u[:, 0] * (1 + 0.02 * t), rtol=1e-14)
     np.testing.assert_allclose(again.drift_inputs(0.0).u, u, rtol=1e-14)

@@ -183,6 +183,18 @@ def _sines(rng: np.random.Generator, t: np.ndarray, count: int) -> np.ndarray:
     return np.sin(np.outer(t, freqs) + phases).sum(axis=1) / count
 
 
+def _sagging(plant: Callable, size: int, rate: float) -> Callable:
+    """``plant(x, a)`` applying ``(1 - rate t) a``: a battery that sags in continuous time.
+
+    The time ``t`` rides along as a state after the plant's ``size`` ones.
+    """
+
+    def rhs(z: np.ndarray, c: np.ndarray) -> np.ndarray:
+        return np.concatenate([plant(z[:size], (1.0 - rate * z[size]) * c), [1.0]])
+
+    return rhs
+
+
 def _actuated(plant: Callable, size: int, lag: float) -> Callable:
     """``plant(x, a)`` with the actuators' outputs ``a`` as states after its ``size`` ones.
 
@@ -372,9 +384,12 @@ def gusty_planar_flights(
     case of :meth:`Trajectory.lag_inputs`.
 
     With ``sag`` > 0 a battery sags by that share over each flight: the vehicle applies
-    ``1 - sag t / T`` times the commands (``T`` the flight's length), and the commands are
-    logged (the case of :meth:`Trajectory.drift_inputs`); the PD does not know it.
+    ``1 - sag t / T`` times the commands (``T`` the flight's length; in continuous time,
+    the RK4 stages see it move within the step), and the commands are logged (the case of
+    :meth:`Trajectory.drift_inputs`); the PD does not know it. Not with ``lag``.
     """
+    if sag and lag:
+        raise ValueError("a sag and a lag together are not simulated: give one")
     rng = np.random.default_rng(seed)
     m, ixx, g = params.mass, params.Ixx, 9.81
     out = []
@@ -391,9 +406,8 @@ def gusty_planar_flights(
             dither = 0.9 * dither + 0.44 * rng.normal(size=2) * [0.05 * m * g, 15 * ixx]
             u = dither + [m * (g + az) / np.cos(phi), ixx * (250 * (tilt - phi) - 30 * w)]
             states[k], inputs[k] = x, u
-            u = u * (1 - sag * k / steps)  # (held over the step, as a command is)
             h = dt / 5
-            for _ in range(5):
+            for j in range(5):
                 decay = np.exp(-h / GUST_TAU)
                 kick = gust * m * g * rng.normal(size=3) * [1.0, 1.0, 0.02]
                 force = decay * force + np.sqrt(1 - decay * decay) * kick
@@ -406,6 +420,9 @@ def gusty_planar_flights(
                 if lag > 0:  # the actuators' outputs ride along as states
                     both = rk4_step(_actuated(plant, 6, lag), np.concatenate([x, act]), u, h)
                     x, act = both[:6], both[6:]
+                elif sag > 0:  # the time since the flight's start rides along
+                    clock = np.concatenate([x, [k * dt + j * h]])
+                    x = rk4_step(_sagging(plant, 6, sag / (steps * dt)), clock, u, h)[:6]
                 else:
                     x = rk4_step(plant, x, u, h)
         t = np.arange(steps) * dt
