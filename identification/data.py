@@ -213,34 +213,35 @@ class Trajectory:
                              f"constants of {tau:g} s)")  # fmt: skip
         return part.slice(rows, len(self)) if rows else part
 
-    def drift_inputs(self, rate: float, start: float | None = None) -> Trajectory:
-        """The trajectory with its held inputs times a gain ``1 + rate (t - start)``.
+    def drift_inputs(self, rate: float | Sequence[float], start: float | None = None
+                     ) -> Trajectory:  # fmt: skip
+        """The trajectory with its held inputs times a gain ``1 + a1 tau + a2 tau^2``.
 
         A battery that sags turns each command into less force as a flight goes on (a
         trial's 15 % over each flight gave 10 terms for 7 and 43 % at 1 s): the vehicle
-        applies the gain times what was logged. ``start`` is the time the gain is 1 at (the
-        log's first row; default this trajectory's). The gain is taken from the logged
-        inputs each call (``meta["input_drift"]`` and ``meta["drift_start"]`` record it, so
-        a second call replaces the first); measured inputs are signals and keep their
-        values; lagged actuators' commands (:attr:`commands`) get the same gain.
+        applies the gain times what was logged. ``rate``: ``a1`` [1/s], or ``(a1, a2)``
+        (a sag that speeds up as the charge runs out: :func:`drift_gain`); ``tau = t -
+        start``, ``start`` the time the gain is 1 at (the log's first row; default this
+        trajectory's). The gain is taken from the logged inputs each call
+        (``meta["input_drift"]`` and ``meta["drift_start"]`` record it, so a second call
+        replaces the first); measured inputs are signals and keep their values; lagged
+        actuators' commands (:attr:`commands`) get the same gain.
 
         Raises:
-            ValueError: ``rate`` not finite, or a gain under :data:`DRIFT_MIN_GAIN` on a row.
+            ValueError: ``rate`` not one or two finite numbers, or a gain under
+                :data:`DRIFT_MIN_GAIN` on a row.
         """
-        rate = float(rate)
-        if not math.isfinite(rate):
-            raise ValueError(f"an input drift is a rate per second, got {rate!r}")
+        terms = drift_terms(rate)
         start = float(self.t[0] if start is None else start)
-        gain = 1.0 + rate * (self.t - start)
+        gain = drift_gain(terms, self.t - start)
         if gain.min() < DRIFT_MIN_GAIN:
             raise ValueError(
-                f"an input drift of {rate:g} per second takes the inputs' gain to "
-                f"{gain.min():.3g} at t = {self.t[int(np.argmin(gain))]:g} s (at least "
-                f"{DRIFT_MIN_GAIN:g}): a gain that changes so much is not a drift"
+                f"an input drift of {drift_text(terms)} falls to {gain.min():.3g} at t = "
+                f"{self.t[int(np.argmin(gain))]:g} s (at least {DRIFT_MIN_GAIN:g}): a gain "
+                "that changes so much is not a drift"
             )
-        old = 1.0 + float(self.meta.get("input_drift", 0.0)) * (
-            self.t - float(self.meta.get("drift_start", self.t[0]))
-        )
+        old = drift_gain(drift_terms(self.meta.get("input_drift", 0.0)),
+                         self.t - float(self.meta.get("drift_start", self.t[0])))  # fmt: skip
         held = [k for k, n in enumerate(self.input_names) if n not in self.measured]
         part = self.slice(0, len(self))
         part.u = self.u.copy()
@@ -248,8 +249,8 @@ class Trajectory:
         if self.commands is not None:
             part.commands = self.commands.copy()
             part.commands[:, held] *= (gain / old)[:, None]
-        if rate:
-            part.meta.update(input_drift=rate, drift_start=start)
+        if any(terms):
+            part.meta.update(input_drift=drift_meta(terms), drift_start=start)
         else:
             part.meta.pop("input_drift", None)
             part.meta.pop("drift_start", None)
@@ -270,8 +271,8 @@ class Trajectory:
         """
         cols = [self.input_names.index(n) for n in self.measured]
         stages = stage_inputs(self.t, self.u, rows, cols)
-        rate = float(self.meta.get("input_drift", 0.0))
-        if self.commands is None and not rate:
+        terms = drift_terms(self.meta.get("input_drift", 0.0))
+        if self.commands is None and not any(terms):
             return stages
         held = [k for k in range(len(self.input_names)) if k not in cols]
         u0, um, u1 = stages[0], stages[1].copy(), stages[2].copy()
@@ -279,12 +280,12 @@ class Trajectory:
             um[:, held], u1[:, held] = lag_stages(self.t, self.u[:, held],
                                                   self.commands[:, held],
                                                   float(self.meta["input_lag"]), rows)  # fmt: skip
-        if rate:  # each stage's gain against the row's, which ``u`` holds
+        if any(terms):  # each stage's gain against the row's, which ``u`` holds
             start = float(self.meta.get("drift_start", self.t[0]))
-            t0, t1 = self.t[rows], self.t[rows + 1]
-            gain = 1.0 + rate * (t0 - start)
-            um[:, held] *= ((1.0 + rate * ((t0 + t1) / 2 - start)) / gain)[:, None]
-            u1[:, held] *= ((1.0 + rate * (t1 - start)) / gain)[:, None]
+            t0, t1 = self.t[rows] - start, self.t[rows + 1] - start
+            gain = drift_gain(terms, t0)
+            um[:, held] *= (drift_gain(terms, (t0 + t1) / 2) / gain)[:, None]
+            u1[:, held] *= (drift_gain(terms, t1) / gain)[:, None]
         return u0, um, u1
 
     @classmethod
@@ -319,13 +320,53 @@ DRIFT_MIN_GAIN = 0.5
 """The least gain an input drift may take the inputs to (:meth:`Trajectory.drift_inputs`)."""
 
 
-def input_drift_of(trajs: Sequence[Trajectory]) -> float:
-    """The drift rate [1/s] of the trajectories' input gain (0: none; one for all)."""
-    rates = sorted({float(t.meta.get("input_drift", 0.0)) for t in trajs})
-    if len(rates) > 1:
-        raise ValueError(f"the trajectories' inputs drift at different rates {rates} per "
-                         "second: give them all the same (drift_segments)")  # fmt: skip
-    return rates[0] if rates else 0.0
+def drift_terms(rate: Any) -> tuple[float, float]:
+    """``(a1, a2)`` of an input drift given as ``a1`` or ``(a1,)`` or ``(a1, a2)``.
+
+    Raises:
+        TypeError: Not a number or a sequence of one or two numbers.
+        ValueError: A coefficient is not finite.
+    """
+    number = int | float | np.floating | np.integer
+    if isinstance(rate, number) and not isinstance(rate, bool):
+        terms = [float(rate)]
+    elif (isinstance(rate, Sequence | np.ndarray) and not isinstance(rate, str)
+          and 1 <= len(rate) <= 2
+          and all(isinstance(a, number) and not isinstance(a, bool) for a in rate)):  # fmt: skip
+        terms = [float(a) for a in rate]
+    else:
+        raise TypeError(f"an input drift is a1 [1/s] or (a1, a2) of 1 + a1 t + a2 t^2, got "
+                        f"{rate!r}")  # fmt: skip
+    if not all(math.isfinite(a) for a in terms):
+        raise ValueError(f"an input drift's coefficients must be finite, got {rate!r}")
+    return terms[0], terms[1] if len(terms) > 1 else 0.0
+
+
+def drift_gain(terms: tuple[float, float], tau: np.ndarray | float) -> np.ndarray:
+    """``1 + a1 tau + a2 tau^2``: the inputs' gain ``tau`` seconds into a log."""
+    return 1.0 + terms[0] * np.asarray(tau) + terms[1] * np.asarray(tau) ** 2
+
+
+def drift_meta(terms: tuple[float, float]) -> float | list[float]:
+    """How a model's ``meta["input_drift"]`` holds a drift: ``a1``, or ``[a1, a2]``."""
+    return terms[0] if terms[1] == 0 else [terms[0], terms[1]]
+
+
+def drift_text(terms: tuple[float, float]) -> str:
+    """A drift in words: ``1 - 0.015 t`` or ``1 - 0.002 t - 0.0009 t^2`` (t in seconds)."""
+    text = f"1 {'+' if terms[0] >= 0 else '-'} {abs(terms[0]):.3g} t"
+    if terms[1]:
+        text += f" {'+' if terms[1] > 0 else '-'} {abs(terms[1]):.3g} t^2"
+    return f"a gain of {text} (t in seconds from each log's first row)"
+
+
+def input_drift_of(trajs: Sequence[Trajectory]) -> tuple[float, float]:
+    """The drift ``(a1, a2)`` of the trajectories' input gain ((0, 0): none; one for all)."""
+    found = sorted({drift_terms(t.meta.get("input_drift", 0.0)) for t in trajs})
+    if len(found) > 1:
+        raise ValueError(f"the trajectories' inputs drift differently {found}: give them all "
+                         "the same (drift_segments)")  # fmt: skip
+    return found[0] if found else (0.0, 0.0)
 
 
 def log_starts(trajs: Sequence[Trajectory]) -> list[float]:
@@ -344,18 +385,18 @@ def log_starts(trajs: Sequence[Trajectory]) -> list[float]:
             else float(tr.t[0]) for tr in trajs]  # fmt: skip
 
 
-def drift_segments(trajs: Sequence[Trajectory], rate: float) -> list[Trajectory]:
-    """Each segment's held inputs times ``1 + rate (t - its log's start)``.
+def drift_segments(trajs: Sequence[Trajectory], rate: float | Sequence[float]
+                   ) -> list[Trajectory]:  # fmt: skip
+    """Each segment's held inputs times the drift's gain from its log's start.
 
     (:meth:`Trajectory.drift_inputs`, the start from :func:`log_starts`.)
 
     Raises:
-        ValueError: ``rate`` is not a number, no input is held, or it takes a gain under
+        TypeError: ``rate`` is not one or two numbers.
+        ValueError: No input is held, or the drift takes a gain under
             :data:`DRIFT_MIN_GAIN`.
     """
-    if isinstance(rate, bool) or not isinstance(rate, int | float | np.floating | np.integer):
-        raise TypeError(f"an input drift is a rate per second, got {rate!r}")
-    if rate and all(n in trajs[0].measured for n in trajs[0].input_names):
+    if any(drift_terms(rate)) and all(n in trajs[0].measured for n in trajs[0].input_names):
         raise ValueError("an input drift scales commands held over each step, and the data "
                          "have none (every input is measured, or there are no inputs)")  # fmt: skip
     starts = log_starts(trajs)

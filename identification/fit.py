@@ -55,6 +55,7 @@ from identification.data import (
     as_trajectories,
     check_glitches,
     data_ranges,
+    drift_meta,
     input_drift_of,
     input_lag_of,
 )
@@ -1250,7 +1251,7 @@ def fit(
         "n_trajectories": len(trajs),
         **({"measured_inputs": list(trajs[0].measured)} if trajs[0].measured else {}),
         **({"input_lag": lag} if (lag := input_lag_of(trajs)) else {}),
-        **({"input_drift": rate} if (rate := input_drift_of(trajs)) else {}),
+        **({"input_drift": drift_meta(rate)} if any(rate := input_drift_of(trajs)) else {}),
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "conditioning": conditioning,

@@ -437,9 +437,11 @@ def _check_meta(meta: dict[str, Any], inputs: Sequence[str], source: str) -> Non
         raise ValueError(f"{source}: meta.input_lag must be a time constant >= 0 [s], "
                          f"got {lag!r}")  # fmt: skip
     drift = meta.get("input_drift", 0.0)
-    if isinstance(drift, bool) or not isinstance(drift, int | float) or not math.isfinite(drift):
-        raise ValueError(f"{source}: meta.input_drift must be a rate per second (a number), "
-                         f"got {drift!r}")  # fmt: skip
+    drift = drift if isinstance(drift, list) else [drift]
+    if not (1 <= len(drift) <= 2 and all(isinstance(a, int | float) and not isinstance(a, bool)
+                                         and math.isfinite(a) for a in drift)):  # fmt: skip
+        raise ValueError(f"{source}: meta.input_drift must be a1 or [a1, a2] (the inputs' "
+                         f"gain 1 + a1 t + a2 t^2), got {meta['input_drift']!r}")  # fmt: skip
     if not isinstance(meta.get("time_column", "t"), str):
         raise ValueError(f"{source}: meta.time_column must be a column name (a string)")
     if not isinstance(meta.get("units", {}), dict):  # (a string was read as seconds, silently)

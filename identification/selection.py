@@ -84,7 +84,11 @@ from identification.data import (
     as_trajectories,
     check_glitches,
     data_ranges,
+    drift_gain,
+    drift_meta,
     drift_segments,
+    drift_terms,
+    drift_text,
     input_drift_of,
     input_lag_of,
     lag_segments,
@@ -255,7 +259,7 @@ class SelectionReport:
         start_spans: Per state, the half-width in rows of the local quadratic the scores'
             predictions start from (:func:`~identification.scoring.start_spans`; 0: the
             logged row).
-        drift: The drift rate of the inputs' gain [1/s] that the model's own terms fit best
+        drift: The drift ``(a1, a2)`` of the inputs' gain that the model's own terms fit best
             (:func:`~identification.diagnostics.input_drift`) where the halves of the logs
             disagree on an input's gain, the data carry a drift, or the drift passes its own
             test; else None.
@@ -274,7 +278,7 @@ class SelectionReport:
     timing: InputTiming | None = None
     prewhitened_timing: InputTiming | None = None
     start_spans: dict[str, int] = field(default_factory=dict)
-    drift: float | None = None
+    drift: tuple[float, float] | None = None
 
     @property
     def best(self) -> Candidate:
@@ -422,7 +426,7 @@ def select_model(
     prewhiten: bool | None = None,
     input_lag: float | None = None,
     keep_rest: bool = False,
-    input_drift: float | None = None,
+    input_drift: float | Sequence[float] | None = None,
 ) -> tuple[IdentifiedModel, SelectionReport]:
     """Identifies a model and chooses its sparsity and window from the data alone.
 
@@ -462,9 +466,10 @@ def select_model(
         keep_rest: Keep rows where the states stay still while the model says they would
             move (:func:`held_blocks`: a vehicle resting on the ground before take-off or
             after landing). By default they are left out, with a note.
-        input_drift: The rate [1/s] of a drift of the held inputs' gain: the vehicle applies
-            ``1 + rate tau`` times each logged input, ``tau`` the time since its log's
-            first row (:meth:`Trajectory.drift_inputs`; 0: none). None (default): as given,
+        input_drift: A drift of the held inputs' gain: the vehicle applies ``1 + a1 tau +
+            a2 tau^2`` times each logged input, ``tau`` the time since its log's first row;
+            ``a1`` [1/s] or ``(a1, a2)`` (:meth:`Trajectory.drift_inputs`; 0: none). None
+            (default): as given,
             and where the halves of the logs disagree on an input's gain and the data carry
             no drift of their own, the drift the model's terms fit best is tried and kept
             where its selection predicts the held-out parts better (a battery that sags;
@@ -500,7 +505,7 @@ def select_model(
     def select(data: list[Trajectory]) -> tuple[IdentifiedModel, SelectionReport]:
         return chain(data, library, settings, prewhiten, auto)
 
-    drifting = input_drift is None and not input_drift_of(trajs)
+    drifting = input_drift is None and not any(input_drift_of(trajs))
     return _finished(*_select_drifted(trajs, select, drifting))
 
 
@@ -509,7 +514,8 @@ DRIFT_ROUNDS = 2
 model's own terms refine it to (where that moves it by more than :data:`DRIFT_MOVED`)."""
 
 DRIFT_MOVED = 1e-3
-"""A refined drift rate this share away from the one selected with is selected again."""
+"""A refined drift whose gain moves by this share of the drift's change over the longest log
+(at its middle or end) is selected again."""
 
 
 def _select_drifted(
@@ -530,47 +536,48 @@ def _select_drifted(
     model, report = select(trajs)
     if not auto or not report.drift:
         return model, report
-    rate, kept = report.drift, None
+    terms, kept = report.drift, None
+    span = max(float(t.t[-1]) - s for t, s in zip(trajs, log_starts(trajs), strict=True))
     for _ in range(DRIFT_ROUNDS):
         try:
-            again = select(drift_segments(trajs, rate))
+            again = select(drift_segments(trajs, terms))
         except ValueError:
             break
         if kept is not None and _relative_score(again[1]) > _relative_score(kept[1]):
             break
         kept = again
         refined = again[1].drift
-        if refined is None or abs(refined - rate) <= DRIFT_MOVED * abs(rate):
+        change = abs(float(drift_gain(terms, span)) - 1.0)
+        if refined is None or max(abs(float(drift_gain(refined, tau) - drift_gain(terms, tau)))
+                                  for tau in (span / 2, span)) <= DRIFT_MOVED * change:  # fmt: skip
             break
-        rate = refined
+        terms = refined
     theirs = _relative_score(report)
     if kept is None:
-        report.warnings.append(f"the model's terms fit a drift of the inputs' gain of "
-                               f"{rate:.3g} per second, and the selection with it failed: the "
-                               "inputs are kept as logged")  # fmt: skip
+        report.warnings.append(f"the model's terms fit {drift_text(terms)} to the inputs, and "
+                               "the selection with it failed: the inputs are kept as "
+                               "logged")  # fmt: skip
         return model, report
-    ours, rate = _relative_score(kept[1]), float(kept[0].meta["input_drift"])
-    span = max(float(t.t[-1]) - s for t, s in zip(trajs, log_starts(trajs), strict=True))
+    ours, terms = _relative_score(kept[1]), drift_terms(kept[0].meta["input_drift"])
     if ours > theirs:  # a drift that predicts the held-out parts worse is not the vehicle's
         report.warnings.append(
-            f"the model's terms fit a drift of the inputs' gain of {rate:.3g} per second, but "
-            f"the model selected with it predicts its held-out data worse ({ours:.3g} of "
-            f"holding the state, against {theirs:.3g}): the inputs are kept as logged"
+            f"the model's terms fit {drift_text(terms)} to the inputs, but the model selected "
+            f"with it predicts its held-out data worse ({ours:.3g} of holding the state, "
+            f"against {theirs:.3g}): the inputs are kept as logged"
         )
         return model, report
     model, report = kept
+    change = float(drift_gain(terms, span)) - 1.0
     report.warnings.insert(0, (
-        f"the inputs act with a gain that drifts in time, 1 {'+' if rate > 0 else '-'} "
-        f"{abs(rate):.3g} per second from each log's first row ({rate * span:+.1%} over "
-        f"the longest log, {span:.3g} s: a battery that sags, fuel or a payload that "
-        "changes): the model's terms fit it (the halves of the logs disagree on an input's "
-        "gain, or its drop in the residual passes the bar), and the model selected with it "
-        f"predicts its held-out data better ({ours:.3g} of holding "
-        f"the state, against {theirs:.3g} as logged). The model is the vehicle at the start "
-        "of its logs (gain 1): simulate and the surrogate env fly it so, and score applies "
-        "the drift (meta.input_drift) to held-out logs as in training (--input-drift 0 there "
-        "reads them as logged; here, --input-drift 0 or input_drift=0 keeps the inputs as "
-        "logged)"
+        f"the inputs act with {drift_text(terms)}, {change:+.1%} over the longest log "
+        f"({span:.3g} s): a battery that sags, fuel or a payload that changes. The model's "
+        "terms fit it (the halves of the logs disagree on an input's gain, or its drop in "
+        "the residual passes the bar), and the model selected with it predicts its held-out "
+        f"data better ({ours:.3g} of holding the state, against {theirs:.3g} as logged). The "
+        "model is the vehicle at the start of its logs (gain 1): simulate and the surrogate "
+        "env fly it so, and score applies the drift (meta.input_drift) to held-out logs as "
+        "in training (--input-drift 0 there reads them as logged; here, --input-drift 0 or "
+        "input_drift=0 keeps the inputs as logged)"
     ))  # fmt: skip
     return model, report
 
@@ -1218,7 +1225,7 @@ def _select_model(
         report.warnings.append(disagree)
     # named by the halves, refined on the terms of a drift's own model, or tested
     report.drift = input_drift(used, names, best.window, xi,
-                               named=drifting or bool(input_drift_of(used)))  # fmt: skip
+                               named=drifting or any(input_drift_of(used)))  # fmt: skip
     empty = empty_equation_note(used, xi)
     if empty:
         report.warnings.append(empty)
@@ -1236,7 +1243,7 @@ def _select_model(
         "n_trajectories": len(trajs),
         **({"measured_inputs": list(trajs[0].measured)} if trajs[0].measured else {}),
         **({"input_lag": lag} if (lag := input_lag_of(trajs)) else {}),
-        **({"input_drift": rate} if (rate := input_drift_of(trajs)) else {}),
+        **({"input_drift": drift_meta(rate)} if any(rate := input_drift_of(trajs)) else {}),
         "n_samples": int(sum(len(t) for t in trajs)),
         "dt": first.dt,
         "ranges": data_ranges(trajs),

@@ -67,30 +67,31 @@ def _lagged(trajs: list, tau: float) -> tuple[list, str]:
                   f"the actuators' start settles){short_note}")  # fmt: skip
 
 
-def _drifted(trajs: list, rate: float) -> tuple[list, str]:
-    """The segments with their held inputs' gain drifting at ``rate``, and what (one line)."""
-    from identification.data import drift_segments
+def _drifted(trajs: list, drift: Any) -> tuple[list, str]:
+    """The segments with their held inputs' gain drifting, and what (one line)."""
+    from identification.data import drift_segments, drift_terms, drift_text
 
     try:
-        kept = drift_segments(trajs, rate)
-    except ValueError as exc:
+        kept = drift_segments(trajs, drift_terms(drift))
+    except (TypeError, ValueError) as exc:
         _fail(f"--input-drift: {exc}")
     held = [n for n in trajs[0].input_names if n not in trajs[0].measured]
-    return kept, (f"{', '.join(held)} times 1 {'+' if rate > 0 else '-'} {abs(rate):g} per "
-                  "second from each log's first row (--input-drift)")  # fmt: skip
+    return kept, f"{', '.join(held)} with {drift_text(drift_terms(drift))} (--input-drift)"
 
 
-def _drift_option(text: str) -> float | None:
-    """``--input-drift``: None for auto, else the rate [1/s] (refused in one line)."""
+def _drift_option(text: str) -> tuple[float, float] | None:
+    """``--input-drift``: None for auto, else ``(a1, a2)`` (refused in one line)."""
     if text.strip().lower() == "auto":
         return None
+    parts = text.split(",")
     try:
-        value = float(text)
+        values = [float(p) for p in parts]
     except ValueError:
-        value = math.nan
-    if not math.isfinite(value):
-        _fail(f"--input-drift is 'auto' or a rate per second (a number), got {text!r}")
-    return value
+        values = [math.nan]
+    if not (1 <= len(values) <= 2 and all(math.isfinite(v) for v in values)):
+        _fail(f"--input-drift is 'auto', A1 or A1,A2 (the gain 1 + A1 t + A2 t^2, t in "
+              f"seconds from each log's first row), got {text!r}")  # fmt: skip
+    return values[0], values[1] if len(values) > 1 else 0.0
 
 
 def _lag_option(text: str) -> float | None:
@@ -643,13 +644,13 @@ def identify(
     input_drift: Annotated[
         str,
         typer.Option(
-            help="rate [1/s] at which the held inputs' gain drifts: the vehicle applies 1 + "
-            "RATE t times each logged input, t from its log's first row (a battery that sags: "
-            "negative; 0: they act as logged); auto: as logged, and where the halves of the "
-            "logs disagree on an input's gain, selected again with the drift the model's "
-            "terms fit best and kept if it predicts the held-out data better. The model is "
-            "the vehicle at gain 1",
-            metavar="auto|RATE",
+            help="drift of the held inputs' gain: the vehicle applies 1 + A1 t + A2 t^2 times "
+            "each logged input, t in seconds from its log's first row (a battery that sags: "
+            "negative; 0: they act as logged); auto: as logged, and where the model's terms "
+            "fit a drift (the halves of the logs disagree on an input's gain, or it passes "
+            "its bar), selected again with it and kept if it predicts the held-out data "
+            "better. The model is the vehicle at gain 1",
+            metavar="auto|A1[,A2]",
         ),
     ] = "auto",
     plot: Annotated[
@@ -767,7 +768,7 @@ def identify(
             typer.echo(f"data: inputs taken {abs(input_shift)} row(s) "
                        f"{'later' if input_shift > 0 else 'earlier'} (--input-shift)"
                        + dropped)  # fmt: skip
-        if drift_value:
+        if drift_value is not None and any(drift_value):
             if method == "paper":
                 _fail("the paper's method has no input drift: leave out --input-drift")
             trajs, drifted = _drifted(trajs, drift_value)
@@ -844,7 +845,7 @@ def identify(
                     trajs, lib, config=config, windows=windows, system=label, progress=True,
                     drop_outliers=drop_outliers, prewhiten=prewhiten, keep_rest=keep_rest,
                     input_lag=0.0 if lag_value == 0 else None,  # (a lag given: the data's)
-                    input_drift=0.0 if drift_value == 0 else None,
+                    input_drift=0.0 if drift_value == (0.0, 0.0) else None,
                 )  # fmt: skip
                 noted = ()  # printed with the report
                 best = report.best
@@ -953,10 +954,10 @@ def score(
     input_drift: Annotated[
         str | None,
         typer.Option(
-            help="rate [1/s] of the drift of the held inputs' gain (default, or auto: the "
-            "model's own, from identify; 0: logs whose inputs act as logged, such as a fresh "
-            "battery's first seconds or the applied inputs)",
-            metavar="auto|RATE",
+            help="drift A1[,A2] of the held inputs' gain (default, or auto: the model's own, "
+            "from identify; 0: logs whose inputs act as logged, such as a fresh battery's "
+            "first seconds or the applied inputs)",
+            metavar="auto|A1[,A2]",
             show_default=False,
         ),
     ] = None,
@@ -968,7 +969,7 @@ def score(
     range, and the selection's score against holding the state. The logs are read and
     cleaned as ``identify`` reads them, with the model's variables.
     """
-    from identification.data import load_data
+    from identification.data import drift_terms, load_data
     from identification.diagnostics import (
         data_warnings,
         range_note,
@@ -1016,8 +1017,8 @@ def score(
             typer.echo(f"data: inputs taken {abs(shift)} row(s) {when}, {source}{dropped}")
         drift_given = None if input_drift is None else _drift_option(input_drift)
         rate = loaded.meta.get("input_drift", 0.0) if drift_given is None else drift_given
-        if rate:  # the drift of the inputs' gain the model was identified with
-            trajs, drifted = _drifted(trajs, float(rate))
+        if rate != 0.0 and any(drift_terms(rate)):  # the drift the model was identified with
+            trajs, drifted = _drifted(trajs, rate)
             source = "as in training" if drift_given is None else "as --input-drift asks"
             typer.echo(f"data: {drifted}, {source}")
         given = None if input_lag is None else _lag_option(input_lag)  # (auto: None)

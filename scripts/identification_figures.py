@@ -577,6 +577,7 @@ def sags(config: FitConfig) -> None:
     against the default (the drift of the inputs' gain fitted where the halves of the logs
     disagree), two vehicles, three sags (none: a control) and three noise levels; the 1 s
     error is ``score``'s on three held-out flights of a fresh battery (no sag)."""
+    from identification.data import drift_terms
     from identification.scoring import held_out_errors
 
     print("| vehicle | sag | sigma | as logged: terms, off, worst coef, 1 s | default: drift "
@@ -585,9 +586,9 @@ def sags(config: FitConfig) -> None:
     for name, params in GUST_VEHICLES.items():
         truth = truth_planar(params)
         held = gusty_planar_flights(params, 0.0, seed=999)
-        for sag in (0.0, 0.08, 0.15):
+        for sag, power in ((0.0, 1), (0.08, 1), (0.15, 1), (0.15, 2)):
             for sigma in (0.0, 1e-3, 1e-2):
-                data = gusty_planar_flights(params, 0.0, seed=2, sag=sag)
+                data = gusty_planar_flights(params, 0.0, seed=2, sag=sag, sag_power=power)
                 data = add_noise(data, sigma, seed=3) if sigma else data
                 cells, seconds = [], 0.0
                 for input_drift in (0.0, None):
@@ -603,11 +604,13 @@ def sags(config: FitConfig) -> None:
                     model = selected[0]
                     check = check_support(model, truth)
                     error = max(held_out_errors(model, held, 100).relative)
-                    fitted = model.meta.get("input_drift", 0.0)
-                    cells.append(("" if input_drift == 0 else f"{fitted:.4g}, ")
+                    fitted = drift_terms(model.meta.get("input_drift", 0.0))
+                    shown = f"{fitted[0]:.4g}" + (f" {fitted[1]:+.4g} t^2" if fitted[1] else "")
+                    cells.append(("" if input_drift == 0 else f"{shown}, ")
                                  + f"{check.n_terms}, {check.off}, {check.max_rel_error:.2%}, "
                                  f"{error:.2%}")  # fmt: skip
-                print(f"| {name} | {sag:g} | {sigma:g} | {cells[0]} | {cells[1]} | "
+                shape = "" if power == 1 else f" (t/T)^{power}"
+                print(f"| {name} | {sag:g}{shape} | {sigma:g} | {cells[0]} | {cells[1]} | "
                       f"{seconds:.1f} |", flush=True)  # fmt: skip
 
 

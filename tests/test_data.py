@@ -746,9 +746,15 @@ def test_a_drift_of_the_inputs_gain_scales_each_logs_held_inputs_from_its_first_
     again = drifted.drift_inputs(0.02)  # from the logged inputs, not the drifted ones
     np.testing.assert_allclose(again.u[:, 0], u[:, 0] * (1 + 0.02 * t), rtol=1e-14)
     np.testing.assert_allclose(again.drift_inputs(0.0).u, u, rtol=1e-14)
-    assert input_drift_of([again]) == 0.02 and input_drift_of([again.drift_inputs(0.0)]) == 0.0
-    with pytest.raises(ValueError, match="takes the inputs' gain to 0.202 at t = 8.99 s"):
+    assert input_drift_of([again]) == (0.02, 0.0)
+    assert input_drift_of([again.drift_inputs(0.0)]) == (0.0, 0.0)
+    curved = tr.drift_inputs((-0.01, -0.002))  # a sag that speeds up: 1 - 0.01 t - 0.002 t^2
+    np.testing.assert_allclose(curved.u[:, 0], u[:, 0] * (1 - 0.01 * t - 0.002 * t**2))
+    assert curved.meta["input_drift"] == [-0.01, -0.002]
+    with pytest.raises(ValueError, match=r"1 - 0.2 t \(t in seconds .* falls to 0.202 at t = 8.99"):
         tr.drift_inputs(-0.2)
+    with pytest.raises(TypeError, match="an input drift is a1"):
+        tr.drift_inputs((0.1, 0.2, 0.3))
     # a file split at a gap: the second segment's gain continues from the file's start
     rows = np.column_stack([t, x, u])
     path = tmp_path / "gap.csv"

@@ -1462,7 +1462,7 @@ def test_a_battery_that_sags_alike_in_every_flight_is_fitted_as_a_drift_of_the_i
     sagging = gusty_planar_flights(vehicle, 0.0, seed=4, steps=1000, sag=0.15)
     model, report = select_model(sagging, planar_library(), **FAST)
     assert model.meta["input_drift"] == pytest.approx(-0.015, rel=1e-6), report.warnings
-    assert report.warnings[0].startswith("the inputs act with a gain that drifts in time, 1 - ")
+    assert report.warnings[0].startswith("the inputs act with a gain of 1 - 0.015 t (t in sec")
     check = check_support(model, truth_planar(vehicle))
     assert not check.missed and not check.spurious and check.max_rel_error < 1e-6, check
     heavy = planar_flights(HEAVY_PLANAR, FlightSpec(flights=3, seed=8))
@@ -1495,7 +1495,7 @@ def test_identify_input_drift_applies_a_rate_given_and_refuses_one_that_is_not(t
     run = CliRunner().invoke(app, ["identify", *paths, "--system", "planar", "--lambda", "0.01",
                                    "--input-drift", repr(rate), "--out", str(out)])  # fmt: skip
     assert run.exit_code == 0, run.output
-    assert "u1, u2 times 1 - 0.015 per second" in run.output and "(--input-drift)" in run.output
+    assert "u1, u2 with a gain of 1 - 0.015 t (t in seconds" in run.output, run.output
     model = load_model(out)
     assert model.meta["input_drift"] == rate
     check = check_support(model, truth_planar(vehicle))
@@ -1509,8 +1509,9 @@ def test_identify_input_drift_applies_a_rate_given_and_refuses_one_that_is_not(t
         assert ("as in training" in run.output) is not given, run.output
         scores[given] = float(run.output.split("selection): ")[1].split(";")[0])
     assert scores[()] < 1e-6 < 1e-3 < scores[("--input-drift", "0")], scores
-    for bad, said in (("fast", "--input-drift is 'auto' or a rate per second"),
-                      ("-0.2", "--input-drift: an input drift of -0.2 per second")):  # fmt: skip
+    for bad, said in (("fast", "--input-drift is 'auto', A1 or A1,A2 (the gain"),
+                      ("1,2,3", "--input-drift is 'auto', A1 or A1,A2 (the gain"),
+                      ("-0.2", "an input drift of a gain of 1 - 0.2 t")):  # fmt: skip
         run = CliRunner().invoke(app, ["identify", *paths, "--input-drift", bad, "--out",
                                        str(out)])  # fmt: skip
         assert run.exit_code == 2 and said in run.output, run.output

@@ -183,14 +183,16 @@ def _sines(rng: np.random.Generator, t: np.ndarray, count: int) -> np.ndarray:
     return np.sin(np.outer(t, freqs) + phases).sum(axis=1) / count
 
 
-def _sagging(plant: Callable, size: int, rate: float) -> Callable:
-    """``plant(x, a)`` applying ``(1 - rate t) a``: a battery that sags in continuous time.
+def _sagging(plant: Callable, size: int, sag: float, length: float, power: int) -> Callable:
+    """``plant(x, a)`` applying ``(1 - sag (t / length)^power) a``: a battery's sag.
 
-    The time ``t`` rides along as a state after the plant's ``size`` ones.
+    In continuous time: the time ``t`` rides along as a state after the plant's ``size``
+    ones.
     """
 
     def rhs(z: np.ndarray, c: np.ndarray) -> np.ndarray:
-        return np.concatenate([plant(z[:size], (1.0 - rate * z[size]) * c), [1.0]])
+        gain = 1.0 - sag * (z[size] / length) ** power
+        return np.concatenate([plant(z[:size], gain * c), [1.0]])
 
     return rhs
 
@@ -367,7 +369,7 @@ GUST_TAU = 0.4
 
 def gusty_planar_flights(
     params: PlanarQuadParams, gust: float, seed: int, flights: int = 3, steps: int = 1200,
-    dt: float = 0.01, lag: float = 0.0, sag: float = 0.0,
+    dt: float = 0.01, lag: float = 0.0, sag: float = 0.0, sag_power: int = 1,
 ) -> list[Trajectory]:  # fmt: skip
     """Planar PD flights in unmeasured gusts: data from a simulator of its own, not the envs'.
 
@@ -384,7 +386,8 @@ def gusty_planar_flights(
     case of :meth:`Trajectory.lag_inputs`.
 
     With ``sag`` > 0 a battery sags by that share over each flight: the vehicle applies
-    ``1 - sag t / T`` times the commands (``T`` the flight's length; in continuous time,
+    ``1 - sag (t / T)^sag_power`` times the commands (``T`` the flight's length; 2: a sag
+    that speeds up as the charge runs out; in continuous time,
     the RK4 stages see it move within the step), and the commands are logged (the case of
     :meth:`Trajectory.drift_inputs`); the PD does not know it. Not with ``lag``.
     """
@@ -422,7 +425,8 @@ def gusty_planar_flights(
                     x, act = both[:6], both[6:]
                 elif sag > 0:  # the time since the flight's start rides along
                     clock = np.concatenate([x, [k * dt + j * h]])
-                    x = rk4_step(_sagging(plant, 6, sag / (steps * dt)), clock, u, h)[:6]
+                    sagging = _sagging(plant, 6, sag, steps * dt, sag_power)
+                    x = rk4_step(sagging, clock, u, h)[:6]
                 else:
                     x = rk4_step(plant, x, u, h)
         t = np.arange(steps) * dt
