@@ -332,7 +332,7 @@ def test_a_gain_that_drifts_alike_in_every_log_is_named_from_the_halves(other_cl
     rate = -0.15 / np.ptp(other_clean[0].t)
     # (the gain here is held over each step; the fit's moves within it, as a battery's does)
     assert input_drift(sagged, names, 4, exact) == pytest.approx((rate, 0.0), rel=1e-3)
-    assert abs(input_drift(other_clean, names, 4, exact)[0]) < 1e-5 * abs(rate)
+    assert input_drift(other_clean, names, 4, exact) is None  # (under 1 % of gain: not tried)
 
 
 def test_a_drift_nothing_named_must_pass_its_bar_and_change_the_gain_materially(other_clean):
