@@ -11,6 +11,7 @@ apply to a model it did not fit.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -398,8 +399,11 @@ def input_drift(trajs: Sequence[Trajectory], names: Sequence[str], window: int,
         data = drifted(terms)
         return np.inf if data is None else float(np.mean(np.log(refit(data)[0])))
 
-    ratio = np.maximum(long_run_ratio([t for t, _ in usable], names, xi, window)[driven], 1.0)
     bar = chi2.isf(PRUNE_P, len(driven))
+
+    @functools.cache
+    def ratio() -> np.ndarray:  # (only where a drift is material: one pass over the rows)
+        return np.maximum(long_run_ratio([t for t, _ in usable], names, xi, window)[driven], 1.0)
 
     def earns(before: tuple[float, float], after: tuple[float, float], k: int) -> bool:
         """Whether changing coefficient ``k`` from ``before`` to ``after`` earns its place."""
@@ -407,7 +411,7 @@ def input_drift(trajs: Sequence[Trajectory], names: Sequence[str], window: int,
             return False
         rss0, _ = refit(drifted(before))
         rss1, sigma2 = refit(drifted(after))
-        return float(np.sum((rss0 - rss1) / (sigma2 * ratio))) > bar
+        return float(np.sum((rss0 - rss1) / (sigma2 * ratio()))) > bar
 
     bounds = (now[0] - DRIFT_SPAN / span, now[0] + DRIFT_SPAN / span)
     found = minimize_scalar(lambda a: cost((a, 0.0)), bounds=bounds, method="bounded",
